@@ -1,0 +1,28 @@
+//! fdd-estimators: the filters and plant models that fdd's monitors use as residual generators.
+//!
+//! Pure math: no I/O, no clock, and no heap allocation in any Kalman-type predict or update
+//! (fixed-size `nalgebra` types throughout). Every update returns an [`Innovation`] for the
+//! detectors; every failure is a [`FilterError`] value and leaves the filter's estimate as it was.
+//!
+//! - [`model`]: the [`TransitionModel`] / [`ObservationModel`] traits a plant implements.
+//! - [`ekf::Ekf`], [`ukf::Ukf`] with the [`sigma_points`] sets AHSM, ARM, AGM and scaled.
+//! - [`particle::ParticleFilter`]: a bootstrap reference estimator (allocates at construction).
+//! - [`models`]: the electronic throttle and a linear model.
+
+pub mod correction;
+pub mod ekf;
+pub mod error;
+pub mod innovation;
+pub mod linalg;
+pub mod model;
+pub mod models;
+pub mod particle;
+pub mod sigma_points;
+pub mod ukf;
+
+pub use ekf::Ekf;
+pub use error::{ConfigError, FilterError};
+pub use innovation::Innovation;
+pub use model::{numerical_jacobian, ObservationModel, TransitionModel};
+pub use sigma_points::{SigmaKind, SigmaPoints};
+pub use ukf::Ukf;

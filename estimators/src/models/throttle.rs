@@ -1,0 +1,282 @@
+//! Piecewise-affine model of an automotive electronic throttle (DC motor, gears, return spring,
+//! friction), after the wattmeter UKF paper (shared/REFERENCE.md §1, Table I), sampled at 1 ms.
+//!
+//! State `x = [0.1 theta, rho, i]`: `theta` the plate angle (deg), scaled by
+//! [`ThrottleParams::angle_scale`]; `rho` the angular velocity in the identified model's own
+//! units; `i` the motor current (A). Input: motor voltage `u` (V). In mode `s`, chosen by the
+//! angle (`[0, 8]`, `(8, 16]`, `(16, 90]` deg):
+//!
+//! ```text
+//! x+ = A_s x + [0, 0, b_s]' u + [0, c1_s sgn(rho) + c2_s sgn(theta - theta_sw) + c3_s, 0]'
+//! ```
+//!
+//! How we read the paper's ambiguous points:
+//! - `sgn(theta - 1)`: `theta` is the angle in **degrees**, so the term switches at 1 deg
+//!   (`theta_sw` = [`ThrottleParams::friction_switch_deg`]). With that reading each mode's static
+//!   map `theta(u)` lands inside its own angle band and the three bands join up (mode 1 for
+//!   u = 0.19..0.29 V, mode 2 for 0.30..0.38 V, mode 3 above). Reading it as the scaled state
+//!   (a switch at 10 deg) leaves mode 2 without any equilibrium in (8, 10] deg. The unit test
+//!   `static_map_bands_join_up` checks this.
+//! - `sgn(0) = 0`: at rest the Coulomb term vanishes.
+//! - The plate lives in `[0, 90]` deg. A step that would leave the range puts the plate on the
+//!   stop and zeroes its velocity (an inelastic stop); [`TransitionModel::constrain`] does this,
+//!   so the truth simulation and every filter use the same rule.
+//! - The mode is chosen from the angle at the start of the step (the paper's `theta_k in Theta_s`).
+
+use nalgebra::{Matrix3, SMatrix, Vector1, Vector2, Vector3};
+use serde::Deserialize;
+
+use crate::model::{ObservationModel, TransitionModel};
+
+/// Identified coefficients of one mode (Table I). Dimensionless except as implied by the state
+/// units: `b` maps volts to amperes per step, `c*` act on `rho`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ThrottleMode {
+    pub a12: f64,
+    pub a21: f64,
+    pub a22: f64,
+    pub a23: f64,
+    pub a32: f64,
+    pub a33: f64,
+    pub b: f64,
+    pub c1: f64,
+    pub c2: f64,
+    pub c3: f64,
+}
+
+impl ThrottleMode {
+    /// `A_s` of the mode.
+    pub fn a(&self) -> Matrix3<f64> {
+        Matrix3::new(
+            1.0, self.a12, 0.0, self.a21, self.a22, self.a23, 0.0, self.a32, self.a33,
+        )
+    }
+}
+
+/// Throttle model parameters (loaded from `config/throttle.toml`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ThrottleParams {
+    /// Sampling period (s) the coefficients were identified for.
+    pub dt_s: f64,
+    /// `x[0] = angle_scale * theta_deg`.
+    pub angle_scale: f64,
+    /// Upper angle (deg) of mode 1 and of mode 2; mode 3 is above.
+    pub mode_upper_deg: [f64; 2],
+    /// Mechanical stops (deg).
+    pub angle_limits_deg: [f64; 2],
+    /// Angle (deg) at which the `c2 sgn(theta - theta_sw)` spring-preload term changes sign.
+    pub friction_switch_deg: f64,
+    /// Modes 1, 2, 3.
+    pub modes: [ThrottleMode; 3],
+}
+
+impl ThrottleParams {
+    /// Checks ranges that the model relies on, naming the offending key.
+    pub fn validate(&self) -> Result<(), String> {
+        let all = [
+            ("dt_s", self.dt_s),
+            ("angle_scale", self.angle_scale),
+            ("mode_upper_deg[0]", self.mode_upper_deg[0]),
+            ("mode_upper_deg[1]", self.mode_upper_deg[1]),
+            ("angle_limits_deg[0]", self.angle_limits_deg[0]),
+            ("angle_limits_deg[1]", self.angle_limits_deg[1]),
+            ("friction_switch_deg", self.friction_switch_deg),
+        ];
+        if let Some((k, v)) = all.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(format!("`{k}` = {v} is not finite"));
+        }
+        if self.dt_s <= 0.0 {
+            return Err(format!("`dt_s` = {} must be positive", self.dt_s));
+        }
+        if self.angle_scale <= 0.0 {
+            return Err(format!(
+                "`angle_scale` = {} must be positive",
+                self.angle_scale
+            ));
+        }
+        let [lo, hi] = self.angle_limits_deg;
+        let [m1, m2] = self.mode_upper_deg;
+        if !(lo < m1 && m1 < m2 && m2 < hi) {
+            return Err(format!(
+                "need angle_limits_deg[0] < mode_upper_deg[0] < mode_upper_deg[1] < angle_limits_deg[1], got {lo} {m1} {m2} {hi}"
+            ));
+        }
+        for (s, m) in self.modes.iter().enumerate() {
+            let v = [
+                m.a12, m.a21, m.a22, m.a23, m.a32, m.a33, m.b, m.c1, m.c2, m.c3,
+            ];
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err(format!("`modes[{s}]` has a non-finite coefficient"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The throttle dynamics (a [`TransitionModel`] with one input, the motor voltage).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ThrottleModel {
+    params: ThrottleParams,
+}
+
+/// Index (0, 1, 2) of the mode active at angle `theta_deg`.
+pub fn mode_index(params: &ThrottleParams, theta_deg: f64) -> usize {
+    if theta_deg <= params.mode_upper_deg[0] {
+        0
+    } else if theta_deg <= params.mode_upper_deg[1] {
+        1
+    } else {
+        2
+    }
+}
+
+fn sgn(v: f64) -> f64 {
+    if v > 0.0 {
+        1.0
+    } else if v < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
+
+impl ThrottleModel {
+    /// Wraps validated parameters.
+    pub fn new(params: ThrottleParams) -> Result<Self, String> {
+        params.validate()?;
+        Ok(Self { params })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &ThrottleParams {
+        &self.params
+    }
+
+    /// Plate angle (deg) of a state.
+    pub fn angle_deg(&self, x: &Vector3<f64>) -> f64 {
+        x[0] / self.params.angle_scale
+    }
+
+    /// Scaled state component for an angle (deg).
+    pub fn scaled_angle(&self, theta_deg: f64) -> f64 {
+        theta_deg * self.params.angle_scale
+    }
+
+    /// Mode index (0..3) active in state `x`.
+    pub fn mode(&self, x: &Vector3<f64>) -> usize {
+        mode_index(&self.params, self.angle_deg(x))
+    }
+
+    /// Steady state of mode `s` under constant voltage `u` (ignoring the stops and with
+    /// `sgn(rho) = 0`), returned as the angle in degrees. Used to check how the modes join.
+    pub fn static_angle_deg(&self, s: usize, u: f64, above_switch: bool) -> f64 {
+        let m = &self.params.modes[s];
+        let i = m.b * u / (1.0 - m.a33);
+        let phi = m.c2 * if above_switch { 1.0 } else { -1.0 } + m.c3;
+        let x1 = -(m.a23 * i + phi) / m.a21;
+        x1 / self.params.angle_scale
+    }
+}
+
+impl TransitionModel<3, 1> for ThrottleModel {
+    fn transition(&self, x: &Vector3<f64>, u: &Vector1<f64>) -> Vector3<f64> {
+        let theta = self.angle_deg(x);
+        let m = &self.params.modes[mode_index(&self.params, theta)];
+        let drift = m.c1 * sgn(x[1]) + m.c2 * sgn(theta - self.params.friction_switch_deg) + m.c3;
+        Vector3::new(
+            x[0] + m.a12 * x[1],
+            m.a21 * x[0] + m.a22 * x[1] + m.a23 * x[2] + drift,
+            m.a32 * x[1] + m.a33 * x[2] + m.b * u[0],
+        )
+    }
+
+    /// `A_s` of the active mode: the sign terms are piecewise constant, so their derivative is
+    /// zero almost everywhere.
+    fn transition_jacobian(&self, x: &Vector3<f64>, _u: &Vector1<f64>) -> Matrix3<f64> {
+        self.params.modes[self.mode(x)].a()
+    }
+
+    fn constrain(&self, x: &mut Vector3<f64>) {
+        let [lo, hi] = self.params.angle_limits_deg;
+        let (lo, hi) = (lo * self.params.angle_scale, hi * self.params.angle_scale);
+        if x[0] < lo {
+            x[0] = lo;
+            x[1] = 0.0;
+        } else if x[0] > hi {
+            x[0] = hi;
+            x[1] = 0.0;
+        }
+    }
+}
+
+/// Throttle position sensor: 0..90 deg maps linearly to 0..5 V.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PositionSensor {
+    /// Volts per unit of the scaled angle state `x[0]`.
+    volts_per_state: f64,
+}
+
+impl PositionSensor {
+    /// Sensor with `full_scale_v` volts at `full_scale_deg` degrees, for a model whose state
+    /// carries `angle_scale * theta`.
+    pub fn new(full_scale_v: f64, full_scale_deg: f64, angle_scale: f64) -> Self {
+        Self {
+            volts_per_state: full_scale_v / full_scale_deg / angle_scale,
+        }
+    }
+
+    /// Sensor voltage for a state.
+    pub fn volts(&self, x: &Vector3<f64>) -> f64 {
+        self.volts_per_state * x[0]
+    }
+}
+
+impl ObservationModel<3, 1, 1> for PositionSensor {
+    fn observe(&self, x: &Vector3<f64>, _u: &Vector1<f64>) -> Vector1<f64> {
+        Vector1::new(self.volts(x))
+    }
+
+    fn observation_jacobian(&self, _x: &Vector3<f64>, _u: &Vector1<f64>) -> SMatrix<f64, 1, 3> {
+        SMatrix::<f64, 1, 3>::new(self.volts_per_state, 0.0, 0.0)
+    }
+}
+
+/// Wattmeter on the motor supply: `y = i^2` (power into a unit resistance, A^2). It cannot tell
+/// the sign of the current.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Wattmeter;
+
+impl ObservationModel<3, 1, 1> for Wattmeter {
+    fn observe(&self, x: &Vector3<f64>, _u: &Vector1<f64>) -> Vector1<f64> {
+        Vector1::new(x[2] * x[2])
+    }
+
+    fn observation_jacobian(&self, x: &Vector3<f64>, _u: &Vector1<f64>) -> SMatrix<f64, 1, 3> {
+        SMatrix::<f64, 1, 3>::new(0.0, 0.0, 2.0 * x[2])
+    }
+}
+
+/// Position sensor and wattmeter together: `y = [volts, i^2]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PositionAndWattmeter {
+    pub position: PositionSensor,
+}
+
+impl ObservationModel<3, 2, 1> for PositionAndWattmeter {
+    fn observe(&self, x: &Vector3<f64>, _u: &Vector1<f64>) -> Vector2<f64> {
+        Vector2::new(self.position.volts(x), x[2] * x[2])
+    }
+
+    fn observation_jacobian(&self, x: &Vector3<f64>, _u: &Vector1<f64>) -> SMatrix<f64, 2, 3> {
+        SMatrix::<f64, 2, 3>::new(
+            self.position.volts_per_state,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            2.0 * x[2],
+        )
+    }
+}

@@ -1,0 +1,174 @@
+//! Unscented Kalman filter with additive process and measurement noise, generic over the
+//! sigma-point set.
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::correction::{check_covariance, check_input, check_measurement, correct};
+use crate::error::{ConfigError, FilterError};
+use crate::innovation::Innovation;
+use crate::linalg::{all_finite, cholesky, symmetrize};
+use crate::model::{ObservationModel, TransitionModel};
+use crate::sigma_points::SigmaPoints;
+
+/// An additive-noise UKF: `x[k+1] = f(x[k], u[k]) + w`, `y = h(x, u) + v`, `w ~ N(0, Q)`,
+/// `v ~ N(0, R)`. `N` states, `M` measurements, `U` inputs, `L` sigma points.
+///
+/// `predict` propagates sigma points drawn from the posterior through `f`; `update` draws fresh
+/// points from the prediction (so that `Q` is seen by the measurement) and propagates them
+/// through `h`. Nothing is allocated on the heap.
+#[derive(Debug, Clone)]
+pub struct Ukf<T, O, const N: usize, const M: usize, const U: usize, const L: usize> {
+    transition: T,
+    observation: O,
+    points: SigmaPoints<N, L>,
+    x: SVector<f64, N>,
+    p: SMatrix<f64, N, N>,
+    q: SMatrix<f64, N, N>,
+    r: SMatrix<f64, M, M>,
+}
+
+impl<T, O, const N: usize, const M: usize, const U: usize, const L: usize> Ukf<T, O, N, M, U, L>
+where
+    T: TransitionModel<N, U>,
+    O: ObservationModel<N, M, U>,
+{
+    /// Builds a filter. `p0` and `r` must be symmetric positive definite, `q` positive semidefinite.
+    pub fn new(
+        transition: T,
+        observation: O,
+        points: SigmaPoints<N, L>,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+        q: SMatrix<f64, N, N>,
+        r: SMatrix<f64, M, M>,
+    ) -> Result<Self, ConfigError> {
+        check_covariance("P0", &p0, true)?;
+        check_covariance("Q", &q, false)?;
+        check_covariance("R", &r, true)?;
+        if !all_finite(&x0) {
+            return Err(ConfigError::InvalidParameter {
+                name: "x0",
+                value: f64::NAN,
+                reason: "must be finite",
+            });
+        }
+        Ok(Self {
+            transition,
+            observation,
+            points,
+            x: x0,
+            p: p0,
+            q,
+            r,
+        })
+    }
+
+    /// Current state estimate.
+    pub fn state(&self) -> &SVector<f64, N> {
+        &self.x
+    }
+
+    /// Current state covariance.
+    pub fn covariance(&self) -> &SMatrix<f64, N, N> {
+        &self.p
+    }
+
+    /// The sigma-point set in use.
+    pub fn sigma_points(&self) -> &SigmaPoints<N, L> {
+        &self.points
+    }
+
+    /// The transition model (read-only).
+    pub fn transition_model(&self) -> &T {
+        &self.transition
+    }
+
+    /// The observation model (read-only).
+    pub fn observation_model(&self) -> &O {
+        &self.observation
+    }
+
+    /// Replaces the estimate, e.g. to re-initialize after a detected divergence.
+    pub fn reset(&mut self, x: SVector<f64, N>, p: SMatrix<f64, N, N>) -> Result<(), ConfigError> {
+        check_covariance("P", &p, true)?;
+        self.x = x;
+        self.p = p;
+        Ok(())
+    }
+
+    /// Time update with input `u`. On error the estimate is unchanged.
+    pub fn predict(&mut self, u: &SVector<f64, U>) -> Result<(), FilterError> {
+        check_input(u)?;
+        let s = cholesky(&self.p).map_err(|pivot| FilterError::NotPositiveDefinite {
+            which: "state covariance",
+            pivot,
+        })?;
+        let mut pts = self.points.generate(&self.x, &s);
+        for j in 0..L {
+            let mut xj = self.transition.transition(&pts.column(j).into_owned(), u);
+            self.transition.constrain(&mut xj);
+            pts.set_column(j, &xj);
+        }
+        let x = pts * self.points.mean_weights();
+        let mut p = self.q;
+        let wc = self.points.cov_weights();
+        for j in 0..L {
+            let d = pts.column(j) - x;
+            p += wc[j] * d * d.transpose();
+        }
+        symmetrize(&mut p);
+        if !all_finite(&x) || !all_finite(&p) {
+            return Err(FilterError::NonFiniteResult {
+                which: "prediction",
+            });
+        }
+        self.x = x;
+        self.p = p;
+        Ok(())
+    }
+
+    /// Measurement update with every component of `y`.
+    pub fn update(
+        &mut self,
+        y: &SVector<f64, M>,
+        u: &SVector<f64, U>,
+    ) -> Result<Innovation<M>, FilterError> {
+        self.update_subset(y, u, &[true; M])
+    }
+
+    /// Measurement update using only the components of `y` flagged in `used` (a failed sensor is
+    /// dropped, not fed garbage). On error the estimate is unchanged.
+    pub fn update_subset(
+        &mut self,
+        y: &SVector<f64, M>,
+        u: &SVector<f64, U>,
+        used: &[bool; M],
+    ) -> Result<Innovation<M>, FilterError> {
+        check_input(u)?;
+        check_measurement(y, used)?;
+        let s = cholesky(&self.p).map_err(|pivot| FilterError::NotPositiveDefinite {
+            which: "state covariance",
+            pivot,
+        })?;
+        let xs = self.points.generate(&self.x, &s);
+        let mut ys = SMatrix::<f64, M, L>::zeros();
+        for j in 0..L {
+            ys.set_column(j, &self.observation.observe(&xs.column(j).into_owned(), u));
+        }
+        let y_pred = ys * self.points.mean_weights();
+        let wc = self.points.cov_weights();
+        let mut pyy = self.r;
+        let mut pxy = SMatrix::<f64, N, M>::zeros();
+        for j in 0..L {
+            let dy = ys.column(j) - y_pred;
+            let dx = xs.column(j) - self.x;
+            pyy += wc[j] * dy * dy.transpose();
+            pxy += wc[j] * dx * dy.transpose();
+        }
+        let mut c = correct(&self.x, &self.p, y, &y_pred, pyy, pxy, used)?;
+        self.transition.constrain(&mut c.x);
+        self.x = c.x;
+        self.p = c.p;
+        Ok(c.innovation)
+    }
+}

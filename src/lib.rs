@@ -1,0 +1,7 @@
+//! The `fdd` package: configuration loading and the paper reproductions behind the `fdd` CLI.
+//! The filters, models and simulators live in the workspace crates (`fdd-estimators`,
+//! `fdd-fixtures`, ...); this crate wires them to files and commands.
+
+pub mod config;
+pub mod reproduce;
+pub mod stats;
