@@ -54,6 +54,10 @@ pub struct WattmeterUkfConfig {
     pub p0_diag: [f64; 3],
     pub q_diag: [f64; 3],
     pub r_floor: f64,
+    pub reacquire_window: f64,
+    pub reacquire_threshold: f64,
+    pub reacquire_holdoff: u32,
+    pub reseed_input_tau_s: f64,
 }
 
 /// The whole throttle file.
@@ -90,6 +94,12 @@ impl ThrottleConfig {
         }
         let w = cfg.wattmeter_ukf;
         let nonneg = w.q_diag.iter().chain(&w.p0_diag).all(|v| *v >= 0.0) && w.r_floor >= 0.0;
+        if !(w.reseed_input_tau_s > 0.0) {
+            return Err(invalid(
+                origin,
+                "[wattmeter_ukf] reseed_input_tau_s must be positive",
+            ));
+        }
         if !nonneg {
             return Err(invalid(
                 origin,

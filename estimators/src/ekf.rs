@@ -64,9 +64,17 @@ where
         &self.p
     }
 
-    /// Replaces the estimate.
+    /// Replaces the estimate. `p` must be symmetric positive definite and `x` finite; on error
+    /// nothing changes.
     pub fn reset(&mut self, x: SVector<f64, N>, p: SMatrix<f64, N, N>) -> Result<(), ConfigError> {
         check_covariance("P", &p, true)?;
+        if !all_finite(&x) {
+            return Err(ConfigError::InvalidParameter {
+                name: "x",
+                value: f64::NAN,
+                reason: "must be finite",
+            });
+        }
         self.x = x;
         self.p = p;
         Ok(())

@@ -17,6 +17,7 @@ pub mod linalg;
 pub mod model;
 pub mod models;
 pub mod particle;
+pub mod reacquire;
 pub mod sigma_points;
 pub mod ukf;
 

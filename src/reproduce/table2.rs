@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use fdd_estimators::models::throttle::{ThrottleModel, Wattmeter};
 use fdd_estimators::particle::ParticleFilter;
+use fdd_estimators::reacquire::Reacquire;
 use fdd_estimators::{ConfigError as FilterConfigError, SigmaPoints, Ukf};
 use fdd_fixtures::excitation::{PulseTrain, PulseTrainSpec};
 use fdd_fixtures::throttle_truth::ThrottleTruth;
@@ -169,17 +170,35 @@ pub fn run(cfg: &ThrottleConfig, s: &Table2Settings) -> Result<Table2Report, Tab
         },
     ];
     let mut mode_count = [0u64; 3];
+    let p_reset = p0;
+    // Input low-pass for re-seeding: the plate settles in tens of milliseconds, so the static map
+    // is evaluated at the recently applied voltage, not the instantaneous one.
+    let u_alpha = (model.params().dt_s / w.reseed_input_tau_s).min(1.0);
+    let mut u_slow = 0.0;
+    let mut re = [Reacquire::new(
+        w.reacquire_window,
+        w.reacquire_threshold,
+        w.reacquire_holdoff,
+    )?; 3];
     let start = Instant::now();
     for _ in 0..s.samples {
         let smp = scenario.next();
         let u = Vector1::new(smp.u);
+        u_slow += (smp.u - u_slow) * u_alpha;
         let y = Vector1::new(smp.wattmeter);
         let truth_deg = model.angle_deg(&smp.x);
         mode_count[model.mode(&smp.x)] += 1;
         // Same sequence for each filter: correct with y_k, score, predict with u_k.
         macro_rules! step {
-            ($f:expr, $res:expr) => {{
-                let ok = $f.update(&y, &u).is_ok();
+            ($f:expr, $res:expr, $re:expr) => {{
+                let inn = $f.update(&y, &u);
+                let ok = inn.is_ok();
+                if let Ok(inn) = inn {
+                    if $re.observe(inn.nis, inn.dof) {
+                        let x = model.equilibrium(u_slow);
+                        let _ = $f.reset(x, p_reset);
+                    }
+                }
                 $res.error.push(model.angle_deg($f.state()) - truth_deg);
                 let ok = $f.predict(&u).is_ok() && ok;
                 if !ok {
@@ -187,9 +206,9 @@ pub fn run(cfg: &ThrottleConfig, s: &Table2Settings) -> Result<Table2Report, Tab
                 }
             }};
         }
-        step!(ahsm, results[0]);
-        step!(arm, results[1]);
-        step!(agm, results[2]);
+        step!(ahsm, results[0], re[0]);
+        step!(arm, results[1], re[1]);
+        step!(agm, results[2], re[2]);
     }
     let ukf_wall_time = start.elapsed();
     let total = s.samples as f64;

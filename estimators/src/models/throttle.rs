@@ -180,6 +180,43 @@ impl ThrottleModel {
     }
 }
 
+impl ThrottleModel {
+    /// The state at rest under a constant voltage `u` (V): for each mode its static angle, and
+    /// the mode whose angle band contains it (the bands join up, so normally exactly one does;
+    /// in a gap the nearest band wins). Velocity zero, current `b u / (1 - a33)`, plate clamped to
+    /// its stops. This is the throttle's static map, used to re-seed an estimator that has lost
+    /// track (a stuck UKF can be re-seeded where the plate must be if it has settled).
+    pub fn equilibrium(&self, u: f64) -> Vector3<f64> {
+        let p = &self.params;
+        let mut best = (f64::INFINITY, Vector3::zeros());
+        for s in 0..3 {
+            let mut theta = self.static_angle_deg(s, u, true);
+            if theta < p.friction_switch_deg {
+                theta = self.static_angle_deg(s, u, false);
+            }
+            let (lo, hi) = match s {
+                0 => (f64::NEG_INFINITY, p.mode_upper_deg[0]),
+                1 => (p.mode_upper_deg[0], p.mode_upper_deg[1]),
+                _ => (p.mode_upper_deg[1], f64::INFINITY),
+            };
+            let distance = if theta < lo {
+                lo - theta
+            } else if theta > hi {
+                theta - hi
+            } else {
+                0.0
+            };
+            if distance < best.0 {
+                let m = &p.modes[s];
+                let mut x = Vector3::new(theta * p.angle_scale, 0.0, m.b * u / (1.0 - m.a33));
+                self.constrain(&mut x);
+                best = (distance, x);
+            }
+        }
+        best.1
+    }
+}
+
 impl TransitionModel<3, 1> for ThrottleModel {
     fn transition(&self, x: &Vector3<f64>, u: &Vector1<f64>) -> Vector3<f64> {
         let theta = self.angle_deg(x);
