@@ -1,1 +1,370 @@
-fn main() {}
+//! Cost of one filter step (measurement update + time update), in the order fdd's monitors run
+//! them: `update(y_k, u_k)` then `predict(u_k)`.
+//!
+//! - UKF-AHSM (L = 7), UKF-ARM (L = 4), UKF-AGM (L = 4) on the electronic throttle observed by
+//!   the wattmeter only (n = 3, m = 1, u = 1), with the settings of `config/throttle.toml`.
+//! - EKF on a 6-state, 2-measurement linear plant (analytic Jacobians: `A` and `C`), and on a
+//!   6-state nonlinear plant whose models keep the default numerical (central-difference)
+//!   Jacobians, to show what the numerical linearization costs.
+//!
+//! Every filter is stateful across iterations and is fed a pre-generated, cycled sequence of
+//! simulated measurements, so it stays in the regime it runs in on the vehicle. Each sequence is
+//! run through the filter twice before timing (every step must succeed), and every timed step is
+//! checked too: a benchmark that silently measured the early-return error path would be useless.
+//!
+//! Run with `cargo bench -p fdd-estimators --bench filter_step`. With `FDD_BENCH_NIS=1` each
+//! benchmark also prints, before timing, the mean NIS over the last warm-up pass (about `m` for
+//! a consistent filter), to check that the filters run in a sensible regime.
+
+use divan::{black_box, Bencher};
+use fdd_estimators::models::linear::LinearModel;
+use fdd_estimators::models::throttle::{ThrottleModel, ThrottleParams, Wattmeter};
+use fdd_estimators::{
+    Ekf, FilterError, Innovation, ObservationModel, SigmaPoints, TransitionModel, Ukf,
+};
+use nalgebra::{Matrix1, Matrix3, SMatrix, SVector, Vector1, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_distr::StandardNormal;
+use rand_pcg::Pcg64Mcg;
+
+fn main() {
+    divan::main();
+}
+
+/// Samples in each pre-generated sequence (a power of two, so cycling is a mask).
+const SAMPLES: usize = 4096;
+const MASK: usize = SAMPLES - 1;
+/// Passes over the sequence before timing starts.
+const WARMUP_PASSES: usize = 2;
+
+/// One input/measurement pair fed to a filter.
+#[derive(Clone, Copy)]
+struct Sample<const M: usize, const U: usize> {
+    u: SVector<f64, U>,
+    y: SVector<f64, M>,
+}
+
+/// The update + predict pair every benchmark times.
+trait Step<const M: usize, const U: usize> {
+    fn step(&mut self, s: &Sample<M, U>) -> Result<Innovation<M>, FilterError>;
+}
+
+impl<T, O, const N: usize, const M: usize, const U: usize, const L: usize> Step<M, U>
+    for Ukf<T, O, N, M, U, L>
+where
+    T: TransitionModel<N, U>,
+    O: ObservationModel<N, M, U>,
+{
+    #[inline]
+    fn step(&mut self, s: &Sample<M, U>) -> Result<Innovation<M>, FilterError> {
+        let innovation = self.update(&s.y, &s.u)?;
+        self.predict(&s.u)?;
+        Ok(innovation)
+    }
+}
+
+impl<T, O, const N: usize, const M: usize, const U: usize> Step<M, U> for Ekf<T, O, N, M, U>
+where
+    T: TransitionModel<N, U>,
+    O: ObservationModel<N, M, U>,
+{
+    #[inline]
+    fn step(&mut self, s: &Sample<M, U>) -> Result<Innovation<M>, FilterError> {
+        let innovation = self.update(&s.y, &s.u)?;
+        self.predict(&s.u)?;
+        Ok(innovation)
+    }
+}
+
+/// Warms `filter` up on `data` (panicking on any refused step), then times one step per
+/// iteration, cycling through `data`. Panics after timing if any timed step was refused.
+fn bench_filter<F, const M: usize, const U: usize>(
+    bencher: Bencher,
+    mut filter: F,
+    data: &[Sample<M, U>],
+) where
+    F: Step<M, U>,
+{
+    assert_eq!(data.len(), SAMPLES);
+    let mut nis_sum = 0.0;
+    for pass in 0..WARMUP_PASSES {
+        nis_sum = 0.0;
+        for (k, s) in data.iter().enumerate() {
+            match filter.step(s) {
+                Ok(innovation) => nis_sum += innovation.nis,
+                Err(e) => panic!("warm-up pass {pass}, sample {k}: filter refused the step: {e}"),
+            }
+        }
+    }
+    if std::env::var_os("FDD_BENCH_NIS").is_some() {
+        eprintln!("mean NIS {:.3}", nis_sum / SAMPLES as f64);
+    }
+    let mut k = 0usize;
+    let mut errors = 0u64;
+    bencher.bench_local(|| {
+        let s = black_box(&data[k & MASK]);
+        k = k.wrapping_add(1);
+        match filter.step(s) {
+            Ok(innovation) => innovation.nis,
+            Err(_) => {
+                errors += 1;
+                f64::NAN
+            }
+        }
+    });
+    assert_eq!(errors, 0, "{errors} of {k} timed steps were refused");
+}
+
+/// Rectangular pulses (random width and level) through a first-order low-pass: a smooth but
+/// rich excitation. The last `rest` samples are zero so that a cycled trajectory, which starts
+/// at rest, does not jump at the wrap.
+fn pulse_train(
+    rng: &mut Pcg64Mcg,
+    width: (usize, usize),
+    level: (f64, f64),
+    smoothing: f64,
+    rest: usize,
+) -> Vec<f64> {
+    let mut out = Vec::with_capacity(SAMPLES);
+    let (mut left, mut target, mut v) = (0usize, 0.0, 0.0);
+    for k in 0..SAMPLES {
+        if k >= SAMPLES - rest {
+            target = 0.0;
+        } else if left == 0 {
+            left = rng.random_range(width.0..=width.1);
+            target = rng.random_range(level.0..=level.1);
+        }
+        left = left.saturating_sub(1);
+        v += smoothing * (target - v);
+        out.push(v);
+    }
+    out
+}
+
+fn normal(rng: &mut Pcg64Mcg) -> f64 {
+    rng.sample(StandardNormal)
+}
+
+// ------------------------------------------------------------------------------------------
+// Throttle, wattmeter-only UKFs
+// ------------------------------------------------------------------------------------------
+
+fn throttle_model() -> ThrottleModel {
+    let config: toml::Table =
+        toml::from_str(include_str!("../../config/throttle.toml")).expect("throttle.toml parses");
+    let params: ThrottleParams = config
+        .get("model")
+        .expect("throttle.toml has a [model] table")
+        .clone()
+        .try_into()
+        .expect("[model] is a valid ThrottleParams");
+    ThrottleModel::new(params).expect("throttle parameters are valid")
+}
+
+/// Filter settings (the `[wattmeter_ukf]` values of `config/throttle.toml`).
+fn throttle_covariances() -> (Vector3<f64>, Matrix3<f64>, Matrix3<f64>, Matrix1<f64>) {
+    let x0 = Vector3::zeros();
+    let p0 = Matrix3::identity();
+    let q = Matrix3::from_diagonal(&Vector3::new(3.15e-4, 1e-2, 1.62e-4));
+    let r = Matrix1::new(1.0 + 0.1);
+    (x0, p0, q, r)
+}
+
+/// Simulated throttle under a 0..1.2 V pulse train, with the truth process noise of
+/// `config/throttle.toml` and a wattmeter `i^2 + v`, `v ~ N(0, 1)` (R = 1 + the 0.1 floor).
+fn throttle_data(model: &ThrottleModel) -> Vec<Sample<1, 1>> {
+    let mut rng = Pcg64Mcg::seed_from_u64(0x7407_7001);
+    let volts = pulse_train(&mut rng, (20, 400), (0.0, 1.2), 0.1, 600);
+    let process_std = Vector3::new(0.591_607_978_309_961_6, 0.0, 0.424_264_068_711_928_5) * 0.03;
+    let mut x = Vector3::zeros();
+    let mut data = Vec::with_capacity(SAMPLES);
+    for &v in &volts {
+        let u = Vector1::new(v);
+        let y = Vector1::new(x[2] * x[2] + normal(&mut rng));
+        data.push(Sample { u, y });
+        let w = Vector3::from_fn(|i, _| process_std[i] * normal(&mut rng));
+        x = model.transition(&x, &u) + w;
+        model.constrain(&mut x);
+    }
+    data
+}
+
+#[divan::bench(sample_count = 1000, sample_size = 256)]
+fn ukf_ahsm_throttle(bencher: Bencher) {
+    let model = throttle_model();
+    let (x0, p0, q, r) = throttle_covariances();
+    let points = SigmaPoints::<3, 7>::ahsm(12.0).expect("AHSM set");
+    let filter = Ukf::<_, _, 3, 1, 1, 7>::new(model, Wattmeter, points, x0, p0, q, r)
+        .expect("UKF-AHSM settings");
+    bench_filter(bencher, filter, &throttle_data(&model));
+}
+
+#[divan::bench(sample_count = 1000, sample_size = 256)]
+fn ukf_arm_throttle(bencher: Bencher) {
+    let model = throttle_model();
+    let (x0, p0, q, r) = throttle_covariances();
+    let points = SigmaPoints::<3, 4>::arm(0.5).expect("ARM set");
+    let filter = Ukf::<_, _, 3, 1, 1, 4>::new(model, Wattmeter, points, x0, p0, q, r)
+        .expect("UKF-ARM settings");
+    bench_filter(bencher, filter, &throttle_data(&model));
+}
+
+#[divan::bench(sample_count = 1000, sample_size = 256)]
+fn ukf_agm_throttle(bencher: Bencher) {
+    let model = throttle_model();
+    let (x0, p0, q, r) = throttle_covariances();
+    let points = SigmaPoints::<3, 4>::agm(&Vector3::new(0.5, 0.5, 0.5)).expect("AGM set");
+    let filter = Ukf::<_, _, 3, 1, 1, 4>::new(model, Wattmeter, points, x0, p0, q, r)
+        .expect("UKF-AGM settings");
+    bench_filter(bencher, filter, &throttle_data(&model));
+}
+
+// ------------------------------------------------------------------------------------------
+// 6-state, 2-measurement EKFs
+// ------------------------------------------------------------------------------------------
+
+type V6 = SVector<f64, 6>;
+type M6 = SMatrix<f64, 6, 6>;
+type V2 = SVector<f64, 2>;
+type M2 = SMatrix<f64, 2, 2>;
+
+/// Sampling period of the 6-state plants (s).
+const DT6: f64 = 1e-3;
+
+/// `exp(M)` by scaling and squaring with a Taylor series (M small after scaling).
+fn expm<const K: usize>(m: &SMatrix<f64, K, K>) -> SMatrix<f64, K, K> {
+    let squarings = (m.norm().max(1e-300).log2().ceil() as i32 + 4).max(0);
+    let a = m / 2f64.powi(squarings);
+    let mut term = SMatrix::<f64, K, K>::identity();
+    let mut sum = term;
+    for i in 1..=16 {
+        term = term * a / i as f64;
+        sum += term;
+    }
+    for _ in 0..squarings {
+        sum = sum * sum;
+    }
+    sum
+}
+
+/// A 6-state plant: a lightly damped oscillator (x0 position, x1 velocity, f = 8 Hz,
+/// zeta = 0.15) driven through a lag (x2, tau = 20 ms) by the input, and a chain of three lags
+/// (x3..x5, tau = 50, 80, 120 ms) fed by the oscillator position and the driving lag. Sensors:
+/// oscillator position and the end of the chain. Zero-order-hold discretization at 1 ms.
+fn linear_plant() -> LinearModel<6, 2, 1> {
+    let w = 2.0 * std::f64::consts::PI * 8.0;
+    let zeta = 0.15;
+    let (t2, t3, t4, t5) = (0.020, 0.050, 0.080, 0.120);
+    #[rustfmt::skip]
+    let ac = SMatrix::<f64, 7, 7>::from_row_slice(&[
+        // x0        x1              x2       x3         x4        x5        u
+        0.0,         1.0,            0.0,     0.0,       0.0,      0.0,      0.0,
+        -w * w,      -2.0 * zeta * w, w * w,  0.0,       0.0,      0.0,      0.0,
+        0.0,         0.0,            -1.0/t2, 0.0,       0.0,      0.0,      1.0/t2,
+        0.6 / t3,    0.0,            0.4/t3,  -1.0/t3,   0.0,      0.0,      0.0,
+        0.0,         0.0,            0.0,     1.0/t4,    -1.0/t4,  0.0,      0.0,
+        0.0,         0.0,            0.0,     0.0,       1.0/t5,   -1.0/t5,  0.0,
+        0.0,         0.0,            0.0,     0.0,       0.0,      0.0,      0.0,
+    ]);
+    let ad = expm(&(ac * DT6));
+    let a: M6 = ad.fixed_view::<6, 6>(0, 0).into_owned();
+    let b: SMatrix<f64, 6, 1> = ad.fixed_view::<6, 1>(0, 6).into_owned();
+    let mut c = SMatrix::<f64, 2, 6>::zeros();
+    c[(0, 0)] = 1.0;
+    c[(1, 5)] = 1.0;
+    LinearModel {
+        a,
+        b,
+        c,
+        d: SMatrix::zeros(),
+    }
+}
+
+/// A 6-state nonlinear plant (explicit Euler at 1 ms) that keeps the default numerical
+/// Jacobians: a Duffing oscillator (x0, x1; 8 Hz, zeta ~ 0.15) with quadratic air drag, driven through a
+/// saturating actuator lag (x2); a chain of lags (x3..x5) with a saturating coupling from the
+/// oscillator. Sensors: the oscillator position and a quadratic reading of the chain end.
+#[derive(Clone, Copy)]
+struct NonlinearPlant;
+
+/// Smooth saturation with unit slope at 0 and limits +-1.
+#[inline]
+fn sat(v: f64) -> f64 {
+    v / (1.0 + v * v).sqrt()
+}
+
+impl TransitionModel<6, 1> for NonlinearPlant {
+    fn transition(&self, x: &V6, u: &Vector1<f64>) -> V6 {
+        let w2 = (2.0 * std::f64::consts::PI * 8.0_f64).powi(2);
+        let dx = V6::new(
+            x[1],
+            -w2 * (x[0] + 0.5 * x[0] * x[0] * x[0]) - 15.0 * x[1] - 0.05 * x[1] * x[1].abs()
+                + w2 * x[2],
+            (2.0 * sat(u[0]) - x[2]) * (1.0 / 0.020),
+            (sat(2.0 * x[0]) + 0.4 * x[2] - x[3]) * (1.0 / 0.050),
+            (x[3] - x[4]) * (1.0 / 0.080),
+            (x[4] - x[5]) * (1.0 / 0.120),
+        );
+        x + dx * DT6
+    }
+}
+
+impl ObservationModel<6, 2, 1> for NonlinearPlant {
+    fn observe(&self, x: &V6, _u: &Vector1<f64>) -> V2 {
+        V2::new(x[0], x[5] + 0.25 * x[5] * x[5])
+    }
+}
+
+/// Simulates `plant` under a pulse-train input with process noise `q_std` and measurement
+/// noise `r_std`.
+fn six_state_data<P>(plant: &P, seed: u64, q_std: &V6, r_std: &V2) -> Vec<Sample<2, 1>>
+where
+    P: TransitionModel<6, 1> + ObservationModel<6, 2, 1>,
+{
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    let input = pulse_train(&mut rng, (30, 500), (-1.0, 1.0), 0.2, 600);
+    let mut x = V6::zeros();
+    let mut data = Vec::with_capacity(SAMPLES);
+    for &v in &input {
+        let u = Vector1::new(v);
+        let noise = V2::from_fn(|i, _| r_std[i] * normal(&mut rng));
+        data.push(Sample {
+            u,
+            y: plant.observe(&x, &u) + noise,
+        });
+        let w = V6::from_fn(|i, _| q_std[i] * normal(&mut rng));
+        x = plant.transition(&x, &u) + w;
+    }
+    data
+}
+
+fn six_state_noise() -> (V6, V2) {
+    let q_std = V6::new(1e-4, 2e-2, 1e-3, 1e-4, 1e-4, 1e-4);
+    let r_std = V2::new(1e-2, 1e-2);
+    (q_std, r_std)
+}
+
+fn six_state_ekf<P>(plant: P, seed: u64) -> (Ekf<P, P, 6, 2, 1>, Vec<Sample<2, 1>>)
+where
+    P: TransitionModel<6, 1> + ObservationModel<6, 2, 1> + Copy,
+{
+    let (q_std, r_std) = six_state_noise();
+    let data = six_state_data(&plant, seed, &q_std, &r_std);
+    let q = M6::from_diagonal(&q_std.component_mul(&q_std));
+    let r = M2::from_diagonal(&r_std.component_mul(&r_std));
+    let filter =
+        Ekf::new(plant, plant, V6::zeros(), M6::identity() * 0.1, q, r).expect("EKF settings");
+    (filter, data)
+}
+
+#[divan::bench(sample_count = 1000, sample_size = 256)]
+fn ekf6_linear_analytic_jacobian(bencher: Bencher) {
+    let (filter, data) = six_state_ekf(linear_plant(), 0x6e6b_0001);
+    bench_filter(bencher, filter, &data);
+}
+
+#[divan::bench(sample_count = 1000, sample_size = 256)]
+fn ekf6_nonlinear_numerical_jacobian(bencher: Bencher) {
+    let (filter, data) = six_state_ekf(NonlinearPlant, 0x6e6b_0002);
+    bench_filter(bencher, filter, &data);
+}

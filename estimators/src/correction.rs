@@ -42,6 +42,8 @@ pub(crate) fn check_input<const U: usize>(u: &SVector<f64, U>) -> Result<(), Fil
 pub(crate) struct Corrected<const N: usize, const M: usize> {
     pub x: SVector<f64, N>,
     pub p: SMatrix<f64, N, N>,
+    /// Cholesky factor of `p`, computed to check it and kept so the next step can reuse it.
+    pub p_chol: SMatrix<f64, N, N>,
     pub innovation: Innovation<M>,
 }
 
@@ -96,7 +98,7 @@ pub(crate) fn correct<const N: usize, const M: usize>(
             which: "covariance",
         });
     }
-    cholesky(&p).map_err(|pivot| FilterError::NotPositiveDefinite {
+    let p_chol = cholesky(&p).map_err(|pivot| FilterError::NotPositiveDefinite {
         which: "posterior covariance",
         pivot,
     })?;
@@ -107,6 +109,7 @@ pub(crate) fn correct<const N: usize, const M: usize>(
     Ok(Corrected {
         x,
         p,
+        p_chol,
         innovation: Innovation {
             residual,
             covariance: pyy,

@@ -40,17 +40,18 @@ pub fn numerical_jacobian<const N: usize, const R: usize>(
     g: impl Fn(&SVector<f64, N>) -> SVector<f64, R>,
     x: &SVector<f64, N>,
 ) -> SMatrix<f64, R, N> {
-    let base = f64::EPSILON.cbrt();
+    // eps^(1/3) for f64, precomputed: `cbrt` is evaluated in software and showed up in profiles.
+    const BASE: f64 = 6.055454452393343e-6;
     let mut jac = SMatrix::<f64, R, N>::zeros();
     let mut z = *x;
     for j in 0..N {
-        let h = base * x[j].abs().max(1.0);
+        let h = BASE * x[j].abs().max(1.0);
         z[j] = x[j] + h;
         let plus = g(&z);
         z[j] = x[j] - h;
         let minus = g(&z);
         z[j] = x[j];
-        jac.set_column(j, &((plus - minus) / (2.0 * h)));
+        jac.set_column(j, &((plus - minus) * (0.5 / h)));
     }
     jac
 }

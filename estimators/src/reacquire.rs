@@ -78,3 +78,32 @@ impl Reacquire {
         self.resets
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn consistent_innovations_never_trigger_and_biased_ones_do() {
+        let mut r = Reacquire::new(50.0, 2.0, 50).expect("valid");
+        // NIS of exactly its expectation: never triggers.
+        assert!((0..10_000).all(|_| !r.observe(1.0, 1)));
+        // NIS of 4 (a 2-sigma persistent bias): the average 4 - 3 (1 - 1/50)^k passes 2 after
+        // k = ln(1.5)/ln(1/(1 - 1/50)) ~ 20 updates; then it holds off.
+        let first = (1..=200).find(|_| r.observe(4.0, 1)).expect("triggers");
+        assert!((20..=22).contains(&first), "triggered after {first}");
+        assert_eq!(r.resets(), 1);
+        assert!((0..50).all(|_| !r.observe(4.0, 1)), "holdoff respected");
+        // Degrees of freedom normalize the NIS.
+        let mut r2 = Reacquire::new(50.0, 2.0, 0).expect("valid");
+        assert!((0..1000).all(|_| !r2.observe(3.0, 2)));
+        assert!(!r2.observe(f64::NAN, 1));
+    }
+
+    #[test]
+    fn rejects_bad_settings() {
+        assert!(Reacquire::new(1.0, 2.0, 0).is_err());
+        assert!(Reacquire::new(50.0, 0.5, 0).is_err());
+        assert!(Reacquire::new(f64::NAN, 2.0, 0).is_err());
+    }
+}

@@ -25,6 +25,9 @@ pub struct Ukf<T, O, const N: usize, const M: usize, const U: usize, const L: us
     p: SMatrix<f64, N, N>,
     q: SMatrix<f64, N, N>,
     r: SMatrix<f64, M, M>,
+    /// Cholesky factor of `p` when it is known (after an update), saving the next predict a
+    /// factorization.
+    p_chol: Option<SMatrix<f64, N, N>>,
 }
 
 impl<T, O, const N: usize, const M: usize, const U: usize, const L: usize> Ukf<T, O, N, M, U, L>
@@ -60,6 +63,7 @@ where
             p: p0,
             q,
             r,
+            p_chol: None,
         })
     }
 
@@ -88,21 +92,33 @@ where
         &self.observation
     }
 
-    /// Replaces the estimate, e.g. to re-initialize after a detected divergence.
+    /// Replaces the estimate, e.g. to re-initialize after a detected divergence. `p` must be
+    /// symmetric positive definite and `x` finite; on error nothing changes.
     pub fn reset(&mut self, x: SVector<f64, N>, p: SMatrix<f64, N, N>) -> Result<(), ConfigError> {
         check_covariance("P", &p, true)?;
+        if !all_finite(&x) {
+            return Err(ConfigError::InvalidParameter {
+                name: "x",
+                value: f64::NAN,
+                reason: "must be finite",
+            });
+        }
         self.x = x;
         self.p = p;
+        self.p_chol = None;
         Ok(())
     }
 
     /// Time update with input `u`. On error the estimate is unchanged.
     pub fn predict(&mut self, u: &SVector<f64, U>) -> Result<(), FilterError> {
         check_input(u)?;
-        let s = cholesky(&self.p).map_err(|pivot| FilterError::NotPositiveDefinite {
-            which: "state covariance",
-            pivot,
-        })?;
+        let s = match self.p_chol {
+            Some(l) => l,
+            None => cholesky(&self.p).map_err(|pivot| FilterError::NotPositiveDefinite {
+                which: "state covariance",
+                pivot,
+            })?,
+        };
         let mut pts = self.points.generate(&self.x, &s);
         for j in 0..L {
             let mut xj = self.transition.transition(&pts.column(j).into_owned(), u);
@@ -124,6 +140,7 @@ where
         }
         self.x = x;
         self.p = p;
+        self.p_chol = None;
         Ok(())
     }
 
@@ -169,6 +186,7 @@ where
         self.transition.constrain(&mut c.x);
         self.x = c.x;
         self.p = c.p;
+        self.p_chol = Some(c.p_chol);
         Ok(c.innovation)
     }
 }

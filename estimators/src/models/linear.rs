@@ -17,6 +17,7 @@ pub struct LinearModel<const N: usize, const M: usize, const U: usize> {
 impl<const N: usize, const M: usize, const U: usize> TransitionModel<N, U>
     for LinearModel<N, M, U>
 {
+    #[inline]
     fn transition(&self, x: &SVector<f64, N>, u: &SVector<f64, U>) -> SVector<f64, N> {
         self.a * x + self.b * u
     }
@@ -33,6 +34,7 @@ impl<const N: usize, const M: usize, const U: usize> TransitionModel<N, U>
 impl<const N: usize, const M: usize, const U: usize> ObservationModel<N, M, U>
     for LinearModel<N, M, U>
 {
+    #[inline]
     fn observe(&self, x: &SVector<f64, N>, u: &SVector<f64, U>) -> SVector<f64, M> {
         self.c * x + self.d * u
     }

@@ -12,11 +12,12 @@
 //!
 //! How we read the paper's ambiguous points:
 //! - `sgn(theta - 1)`: `theta` is the angle in **degrees**, so the term switches at 1 deg
-//!   (`theta_sw` = [`ThrottleParams::friction_switch_deg`]). With that reading each mode's static
-//!   map `theta(u)` lands inside its own angle band and the three bands join up (mode 1 for
-//!   u = 0.19..0.29 V, mode 2 for 0.30..0.38 V, mode 3 above). Reading it as the scaled state
-//!   (a switch at 10 deg) leaves mode 2 without any equilibrium in (8, 10] deg. The unit test
-//!   `static_map_bands_join_up` checks this.
+//!   (`theta_sw` = [`ThrottleParams::friction_switch_deg`]), near the closed stop where a
+//!   return-spring preload acts. With that reading each mode's static map `theta(u)` is one
+//!   affine piece, and the three bands join up: mode 1 for u = 0.20..0.29 V, mode 2 for
+//!   0.30..0.38 V, mode 3 from 0.34 V (a small hysteresis with mode 2). Reading it as the scaled
+//!   state (a switch at 10 deg) would instead put a 7 deg jump in mode 2's static map in the
+//!   middle of its band. The unit test `static_map_bands_join_up` checks these figures.
 //! - `sgn(0) = 0`: at rest the Coulomb term vanishes.
 //! - The plate lives in `[0, 90]` deg. A step that would leave the range puts the plate on the
 //!   stop and zeroes its velocity (an inelastic stop); [`TransitionModel::constrain`] does this,
@@ -122,6 +123,7 @@ pub struct ThrottleModel {
 }
 
 /// Index (0, 1, 2) of the mode active at angle `theta_deg`.
+#[inline]
 pub fn mode_index(params: &ThrottleParams, theta_deg: f64) -> usize {
     if theta_deg <= params.mode_upper_deg[0] {
         0
@@ -155,6 +157,7 @@ impl ThrottleModel {
     }
 
     /// Plate angle (deg) of a state.
+    #[inline]
     pub fn angle_deg(&self, x: &Vector3<f64>) -> f64 {
         x[0] / self.params.angle_scale
     }
@@ -218,6 +221,7 @@ impl ThrottleModel {
 }
 
 impl TransitionModel<3, 1> for ThrottleModel {
+    #[inline]
     fn transition(&self, x: &Vector3<f64>, u: &Vector1<f64>) -> Vector3<f64> {
         let theta = self.angle_deg(x);
         let m = &self.params.modes[mode_index(&self.params, theta)];
@@ -235,6 +239,7 @@ impl TransitionModel<3, 1> for ThrottleModel {
         self.params.modes[self.mode(x)].a()
     }
 
+    #[inline]
     fn constrain(&self, x: &mut Vector3<f64>) {
         let [lo, hi] = self.params.angle_limits_deg;
         let (lo, hi) = (lo * self.params.angle_scale, hi * self.params.angle_scale);
@@ -265,12 +270,14 @@ impl PositionSensor {
     }
 
     /// Sensor voltage for a state.
+    #[inline]
     pub fn volts(&self, x: &Vector3<f64>) -> f64 {
         self.volts_per_state * x[0]
     }
 }
 
 impl ObservationModel<3, 1, 1> for PositionSensor {
+    #[inline]
     fn observe(&self, x: &Vector3<f64>, _u: &Vector1<f64>) -> Vector1<f64> {
         Vector1::new(self.volts(x))
     }
@@ -286,6 +293,7 @@ impl ObservationModel<3, 1, 1> for PositionSensor {
 pub struct Wattmeter;
 
 impl ObservationModel<3, 1, 1> for Wattmeter {
+    #[inline]
     fn observe(&self, x: &Vector3<f64>, _u: &Vector1<f64>) -> Vector1<f64> {
         Vector1::new(x[2] * x[2])
     }
@@ -302,6 +310,7 @@ pub struct PositionAndWattmeter {
 }
 
 impl ObservationModel<3, 2, 1> for PositionAndWattmeter {
+    #[inline]
     fn observe(&self, x: &Vector3<f64>, _u: &Vector1<f64>) -> Vector2<f64> {
         Vector2::new(self.position.volts(x), x[2] * x[2])
     }
@@ -315,5 +324,141 @@ impl ObservationModel<3, 2, 1> for PositionAndWattmeter {
             0.0,
             2.0 * x[2],
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn table1() -> ThrottleParams {
+        let m = |v: [f64; 10]| ThrottleMode {
+            a12: v[0],
+            a21: v[1],
+            a22: v[2],
+            a23: v[3],
+            a32: v[4],
+            a33: v[5],
+            b: v[6],
+            c1: v[7],
+            c2: v[8],
+            c3: v[9],
+        };
+        ThrottleParams {
+            dt_s: 1e-3,
+            angle_scale: 0.1,
+            mode_upper_deg: [8.0, 16.0],
+            angle_limits_deg: [0.0, 90.0],
+            friction_switch_deg: 1.0,
+            modes: [
+                m([
+                    -0.003, 0.148, 0.9625, -0.8673, 0.0005, 0.944, 0.0741, -0.0654, -0.007, 0.2255,
+                ]),
+                m([
+                    0.0021, -0.143, 0.9941, 1.8944, -0.0004, 0.9514, 0.0346, -0.1068, 0.0529,
+                    -0.3419,
+                ]),
+                m([
+                    0.0442, -0.0192, 0.7981, 0.3538, 0.0349, 0.9043, 0.0442, -0.0055, 0.0615,
+                    -0.0862,
+                ]),
+            ],
+        }
+    }
+
+    #[test]
+    fn static_map_bands_join_up() {
+        let model = ThrottleModel::new(table1()).expect("valid");
+        // Reading sgn(theta - 1) in degrees: every mode has voltages whose static angle lies in
+        // its own band, and the voltage ranges of neighbouring bands meet (within 0.02 V).
+        let band = |s: usize| -> (f64, f64) {
+            let hits: Vec<f64> = (0..=12_000)
+                .map(|k| k as f64 * 1e-4)
+                .filter(|&u| {
+                    let th = model.static_angle_deg(s, u, true);
+                    let (lo, hi) = [(1.0, 8.0), (8.0, 16.0), (16.0, 90.0)][s];
+                    th > lo && th <= hi
+                })
+                .collect();
+            (hits[0], hits[hits.len() - 1])
+        };
+        let (b1, b2, b3) = (band(0), band(1), band(2));
+        assert!(
+            (b1.1 - b2.0).abs() < 0.02,
+            "mode 1 ends {b1:?}, mode 2 starts {b2:?}"
+        );
+        assert!(
+            (b2.1 - b3.0).abs() < 0.05,
+            "mode 2 ends {b2:?}, mode 3 starts {b3:?}"
+        );
+        // The 72 deg at 1 V noted in REFERENCE.md.
+        assert!((model.static_angle_deg(2, 1.0, true) - 72.2).abs() < 0.5);
+        // The scaled reading (switch at 10 deg) would split mode 2's static map into two affine
+        // pieces 7 deg apart at 10 deg; the degree reading keeps one piece per mode.
+        let jump = model.static_angle_deg(1, 0.4, true) - model.static_angle_deg(1, 0.4, false);
+        assert!((jump - 7.4).abs() < 0.1, "jump {jump}");
+    }
+
+    #[test]
+    fn equilibrium_is_a_fixed_point_inside_its_band() {
+        let model = ThrottleModel::new(table1()).expect("valid");
+        for &u in &[0.25, 0.34, 0.6, 1.0] {
+            let x = model.equilibrium(u);
+            let mut y = x;
+            for _ in 0..5000 {
+                y = model.transition(&y, &Vector1::new(u));
+                model.constrain(&mut y);
+            }
+            let (a, b) = (model.angle_deg(&x), model.angle_deg(&y));
+            assert!(
+                (a - b).abs() < 1.0,
+                "u = {u}: static map {a} deg, simulated {b} deg"
+            );
+        }
+        // Below ~0.19 V the spring holds the plate on its lower stop.
+        assert_eq!(model.angle_deg(&model.equilibrium(0.05)), 0.0);
+    }
+
+    #[test]
+    fn stops_clamp_angle_and_stop_the_plate() {
+        let model = ThrottleModel::new(table1()).expect("valid");
+        let mut x = Vector3::new(-0.3, 5.0, 0.2);
+        model.constrain(&mut x);
+        assert_eq!(x, Vector3::new(0.0, 0.0, 0.2));
+        let mut x = Vector3::new(9.4, -2.0, 0.2);
+        model.constrain(&mut x);
+        assert_eq!(x, Vector3::new(9.0, 0.0, 0.2));
+        let mut x = Vector3::new(4.0, -2.0, 0.2);
+        model.constrain(&mut x);
+        assert_eq!(x, Vector3::new(4.0, -2.0, 0.2));
+    }
+
+    #[test]
+    fn modes_follow_the_angle_bands_and_sensors_scale() {
+        let model = ThrottleModel::new(table1()).expect("valid");
+        assert_eq!(model.mode(&Vector3::new(0.8, 0.0, 0.0)), 0);
+        assert_eq!(model.mode(&Vector3::new(0.81, 0.0, 0.0)), 1);
+        assert_eq!(model.mode(&Vector3::new(1.6, 0.0, 0.0)), 1);
+        assert_eq!(model.mode(&Vector3::new(1.61, 0.0, 0.0)), 2);
+        let tps = PositionSensor::new(5.0, 90.0, 0.1);
+        assert!((tps.volts(&Vector3::new(9.0, 0.0, 0.0)) - 5.0).abs() < 1e-12);
+        assert!((tps.volts(&Vector3::new(4.5, 0.0, 0.0)) - 2.5).abs() < 1e-12);
+        let y = Wattmeter.observe(&Vector3::new(1.0, 0.0, -1.5), &Vector1::new(0.0));
+        assert_eq!(y[0], 2.25);
+    }
+
+    #[test]
+    fn invalid_parameters_name_the_key() {
+        let mut p = table1();
+        p.mode_upper_deg = [20.0, 16.0];
+        assert!(ThrottleModel::new(p)
+            .unwrap_err()
+            .contains("mode_upper_deg"));
+        let mut p = table1();
+        p.dt_s = 0.0;
+        assert!(ThrottleModel::new(p).unwrap_err().contains("dt_s"));
+        let mut p = table1();
+        p.modes[1].a23 = f64::NAN;
+        assert!(ThrottleModel::new(p).unwrap_err().contains("modes[1]"));
     }
 }
