@@ -75,6 +75,26 @@ fn particle_filter_reference_runs_on_the_same_data() {
     assert!(pf.error.std() < 10.0, "PF std {}", pf.error.std());
 }
 
+/// The default config text with the line assigning `key` replaced by `key = value`.
+fn with_line(key: &str, value: &str) -> String {
+    let text = fdd::config::DEFAULT_THROTTLE_TOML;
+    let prefix = format!("{key} = ");
+    assert!(
+        text.lines().any(|l| l.starts_with(&prefix)),
+        "no `{key}` line"
+    );
+    text.lines()
+        .map(|l| {
+            if l.starts_with(&prefix) {
+                format!("{key} = {value}")
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 #[test]
 fn bad_settings_and_config_are_named() {
     let cfg = ThrottleConfig::load(None).expect("embedded config");
@@ -83,12 +103,12 @@ fn bad_settings_and_config_are_named() {
     let err = run(&cfg, &settings(0, 1, 1.0)).unwrap_err().to_string();
     assert!(err.contains("samples"), "{err}");
 
-    let text = fdd::config::DEFAULT_THROTTLE_TOML.replace("arm_w0 = 0.5", "arm_w0 = 1.5");
+    let text = with_line("arm_w0", "1.5");
     let cfg = ThrottleConfig::parse(&text, "test.toml").expect("parses");
     let err = run(&cfg, &settings(10, 1, 1.0)).unwrap_err().to_string();
     assert!(err.contains("w0"), "{err}");
 
-    let text = fdd::config::DEFAULT_THROTTLE_TOML.replace("dt_s = 0.001", "dt_s = -0.001");
+    let text = with_line("dt_s", "-0.001");
     let err = ThrottleConfig::parse(&text, "test.toml")
         .unwrap_err()
         .to_string();
