@@ -65,6 +65,21 @@ fn wattmeter_ukfs_stay_within_the_papers_error() {
 }
 
 #[test]
+fn a_better_wattmeter_does_not_hurt_the_symmetric_set() {
+    let cfg = ThrottleConfig::load(None).expect("embedded config");
+    let coarse = run(&cfg, &settings(300_000, 1, 1.0)).expect("runs");
+    let fine = run(&cfg, &settings(300_000, 1, 0.1)).expect("runs");
+    let (c, f) = (&coarse.ukfs[0], &fine.ukfs[0]);
+    assert_eq!(c.name, "UKF-AHSM");
+    assert!(
+        f.error.std() <= c.error.std(),
+        "AHSM std with W = 0.1: {:.3}, with W = 1: {:.3}",
+        f.error.std(),
+        c.error.std()
+    );
+}
+
+#[test]
 fn particle_filter_reference_runs_on_the_same_data() {
     let cfg = ThrottleConfig::load(None).expect("embedded config");
     let mut s = settings(5_000, 3, 1.0);

@@ -149,10 +149,12 @@ fn normal(rng: &mut Pcg64Mcg) -> f64 {
 // Throttle, wattmeter-only UKFs
 // ------------------------------------------------------------------------------------------
 
+fn throttle_config() -> toml::Table {
+    toml::from_str(include_str!("../../config/throttle.toml")).expect("throttle.toml parses")
+}
+
 fn throttle_model() -> ThrottleModel {
-    let config: toml::Table =
-        toml::from_str(include_str!("../../config/throttle.toml")).expect("throttle.toml parses");
-    let params: ThrottleParams = config
+    let params: ThrottleParams = throttle_config()
         .get("model")
         .expect("throttle.toml has a [model] table")
         .clone()
@@ -161,17 +163,38 @@ fn throttle_model() -> ThrottleModel {
     ThrottleModel::new(params).expect("throttle parameters are valid")
 }
 
-/// Filter settings (the `[wattmeter_ukf]` values of `config/throttle.toml`).
+/// The `[wattmeter_ukf]` settings of `config/throttle.toml` the bench needs.
+#[derive(serde::Deserialize)]
+struct WattmeterUkf {
+    ahsm_lambda: f64,
+    arm_w0: f64,
+    agm_v: [f64; 3],
+    p0_diag: [f64; 3],
+    q_diag: [f64; 3],
+    r_floor: f64,
+}
+
+fn wattmeter_ukf() -> WattmeterUkf {
+    throttle_config()
+        .get("wattmeter_ukf")
+        .expect("throttle.toml has a [wattmeter_ukf] table")
+        .clone()
+        .try_into()
+        .expect("[wattmeter_ukf] has the filter settings")
+}
+
+/// Initial state and the covariances, as `fdd reproduce table2` builds them for W = 1.
 fn throttle_covariances() -> (Vector3<f64>, Matrix3<f64>, Matrix3<f64>, Matrix1<f64>) {
+    let w = wattmeter_ukf();
     let x0 = Vector3::zeros();
-    let p0 = Matrix3::identity();
-    let q = Matrix3::from_diagonal(&Vector3::new(3.15e-4, 1e-2, 1.62e-4));
-    let r = Matrix1::new(1.0 + 0.1);
+    let p0 = Matrix3::from_diagonal(&Vector3::from(w.p0_diag));
+    let q = Matrix3::from_diagonal(&Vector3::from(w.q_diag));
+    let r = Matrix1::new(1.0 + w.r_floor);
     (x0, p0, q, r)
 }
 
 /// Simulated throttle under a 0..1.2 V pulse train, with the truth process noise of
-/// `config/throttle.toml` and a wattmeter `i^2 + v`, `v ~ N(0, 1)` (R = 1 + the 0.1 floor).
+/// `config/throttle.toml` and a wattmeter `i^2 + v`, `v ~ N(0, 1)` (R = 1 + the configured floor).
 fn throttle_data(model: &ThrottleModel) -> Vec<Sample<1, 1>> {
     let mut rng = Pcg64Mcg::seed_from_u64(0x7407_7001);
     let volts = pulse_train(&mut rng, (20, 400), (0.0, 1.2), 0.1, 600);
@@ -193,7 +216,7 @@ fn throttle_data(model: &ThrottleModel) -> Vec<Sample<1, 1>> {
 fn ukf_ahsm_throttle(bencher: Bencher) {
     let model = throttle_model();
     let (x0, p0, q, r) = throttle_covariances();
-    let points = SigmaPoints::<3, 7>::ahsm(12.0).expect("AHSM set");
+    let points = SigmaPoints::<3, 7>::ahsm(wattmeter_ukf().ahsm_lambda).expect("AHSM set");
     let filter = Ukf::<_, _, 3, 1, 1, 7>::new(model, Wattmeter, points, x0, p0, q, r)
         .expect("UKF-AHSM settings");
     bench_filter(bencher, filter, &throttle_data(&model));
@@ -203,7 +226,7 @@ fn ukf_ahsm_throttle(bencher: Bencher) {
 fn ukf_arm_throttle(bencher: Bencher) {
     let model = throttle_model();
     let (x0, p0, q, r) = throttle_covariances();
-    let points = SigmaPoints::<3, 4>::arm(0.5).expect("ARM set");
+    let points = SigmaPoints::<3, 4>::arm(wattmeter_ukf().arm_w0).expect("ARM set");
     let filter = Ukf::<_, _, 3, 1, 1, 4>::new(model, Wattmeter, points, x0, p0, q, r)
         .expect("UKF-ARM settings");
     bench_filter(bencher, filter, &throttle_data(&model));
@@ -213,7 +236,7 @@ fn ukf_arm_throttle(bencher: Bencher) {
 fn ukf_agm_throttle(bencher: Bencher) {
     let model = throttle_model();
     let (x0, p0, q, r) = throttle_covariances();
-    let points = SigmaPoints::<3, 4>::agm(&Vector3::new(0.5, 0.5, 0.5)).expect("AGM set");
+    let points = SigmaPoints::<3, 4>::agm(&Vector3::from(wattmeter_ukf().agm_v)).expect("AGM set");
     let filter = Ukf::<_, _, 3, 1, 1, 4>::new(model, Wattmeter, points, x0, p0, q, r)
         .expect("UKF-AGM settings");
     bench_filter(bencher, filter, &throttle_data(&model));
