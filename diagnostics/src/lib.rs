@@ -1,2 +1,16 @@
-//! fdd-diagnostics: change detectors on innovations, fault isolation and the OBD-style event
-//! memory. Empty until the diagnostics issue builds it (see shared/DESIGN.md).
+//! fdd-diagnostics: the layer between the estimators' innovations and the diagnostic trouble
+//! codes a vehicle engineer reads.
+//!
+//! - [`verdict`]: what one test step says ([`Verdict`], [`TestResult`], OBD service $06 records).
+//! - detectors on innovations and raw signals;
+//! - isolation over a fault signature matrix;
+//! - [`dtc`]: SAE J2012 codes, the ISO 14229-1 status byte, debouncing and an AUTOSAR-Dem-shaped
+//!   event memory that emits [`event::DiagnosticEvent`]s.
+//!
+//! Pure logic: no I/O, no clock (time is passed in), no heap allocation per step.
+
+pub mod error;
+pub mod verdict;
+
+pub use error::ConfigError;
+pub use verdict::{Obd06Record, TestResult, Verdict};
