@@ -39,6 +39,8 @@ pub struct EstimatorResult {
     pub error: RunningStats,
     /// Steps a filter refused (error value returned); the estimate is carried over for those.
     pub rejected_steps: u64,
+    /// Times the filter was found inconsistent and re-seeded at the static map.
+    pub reseeds: u64,
     /// Paper's simulated mean and std (deg), when the paper reports this estimator.
     pub paper: Option<(f64, f64)>,
 }
@@ -115,6 +117,45 @@ fn check_settings(s: &Table2Settings) -> Result<(), Table2Error> {
     Ok(())
 }
 
+/// One sample as every wattmeter UKF sees it.
+struct Step<'a> {
+    u: &'a Vector1<f64>,
+    y: &'a Vector1<f64>,
+    truth_deg: f64,
+    /// Where a filter that has lost track is re-seeded: the static map at the recent voltage.
+    reseed_state: Vector3<f64>,
+    reseed_covariance: &'a Matrix3<f64>,
+}
+
+impl Step<'_> {
+    /// Same sequence for each filter: correct with y_k, re-seed if inconsistent, score, predict
+    /// with u_k. A refused step keeps the previous estimate and is counted.
+    fn run<const L: usize>(
+        &self,
+        f: &mut Ukf<ThrottleModel, Wattmeter, 3, 1, 1, L>,
+        monitor: &mut Reacquire,
+        res: &mut EstimatorResult,
+    ) {
+        let mut ok = match f.update(self.y, self.u) {
+            Ok(inn) => {
+                if monitor.observe(inn.nis, inn.dof) {
+                    res.reseeds += 1;
+                    f.reset(self.reseed_state, *self.reseed_covariance).is_ok()
+                } else {
+                    true
+                }
+            }
+            Err(_) => false,
+        };
+        res.error
+            .push(f.transition_model().angle_deg(f.state()) - self.truth_deg);
+        ok &= f.predict(self.u).is_ok();
+        if !ok {
+            res.rejected_steps += 1;
+        }
+    }
+}
+
 /// Runs the protocol.
 pub fn run(cfg: &ThrottleConfig, s: &Table2Settings) -> Result<Table2Report, Table2Error> {
     check_settings(s)?;
@@ -154,23 +195,25 @@ pub fn run(cfg: &ThrottleConfig, s: &Table2Settings) -> Result<Table2Report, Tab
             name: "UKF-AHSM",
             error: RunningStats::default(),
             rejected_steps: 0,
+            reseeds: 0,
             paper: Some((-0.090, 4.002)),
         },
         EstimatorResult {
             name: "UKF-ARM",
             error: RunningStats::default(),
             rejected_steps: 0,
+            reseeds: 0,
             paper: Some((-0.071, 4.061)),
         },
         EstimatorResult {
             name: "UKF-AGM",
             error: RunningStats::default(),
             rejected_steps: 0,
+            reseeds: 0,
             paper: Some((-0.078, 3.983)),
         },
     ];
     let mut mode_count = [0u64; 3];
-    let p_reset = p0;
     // Input low-pass for re-seeding: the plate settles in tens of milliseconds, so the static map
     // is evaluated at the recently applied voltage, not the instantaneous one.
     let u_alpha = (model.params().dt_s / w.reseed_input_tau_s).min(1.0);
@@ -188,27 +231,16 @@ pub fn run(cfg: &ThrottleConfig, s: &Table2Settings) -> Result<Table2Report, Tab
         let y = Vector1::new(smp.wattmeter);
         let truth_deg = model.angle_deg(&smp.x);
         mode_count[model.mode(&smp.x)] += 1;
-        // Same sequence for each filter: correct with y_k, score, predict with u_k.
-        macro_rules! step {
-            ($f:expr, $res:expr, $re:expr) => {{
-                let inn = $f.update(&y, &u);
-                let ok = inn.is_ok();
-                if let Ok(inn) = inn {
-                    if $re.observe(inn.nis, inn.dof) {
-                        let x = model.equilibrium(u_slow);
-                        let _ = $f.reset(x, p_reset);
-                    }
-                }
-                $res.error.push(model.angle_deg($f.state()) - truth_deg);
-                let ok = $f.predict(&u).is_ok() && ok;
-                if !ok {
-                    $res.rejected_steps += 1;
-                }
-            }};
-        }
-        step!(ahsm, results[0], re[0]);
-        step!(arm, results[1], re[1]);
-        step!(agm, results[2], re[2]);
+        let step = Step {
+            u: &u,
+            y: &y,
+            truth_deg,
+            reseed_state: model.equilibrium(u_slow),
+            reseed_covariance: &p0,
+        };
+        step.run(&mut ahsm, &mut re[0], &mut results[0]);
+        step.run(&mut arm, &mut re[1], &mut results[1]);
+        step.run(&mut agm, &mut re[2], &mut results[2]);
     }
     let ukf_wall_time = start.elapsed();
     let total = s.samples as f64;
@@ -260,6 +292,7 @@ fn run_particle_filter(
         name: "particle filter",
         error: RunningStats::default(),
         rejected_steps: 0,
+        reseeds: 0,
         paper: None,
     };
     for _ in 0..s.samples {
@@ -287,8 +320,8 @@ pub fn render(r: &Table2Report) -> String {
     );
     let _ = writeln!(
         out,
-        "{:<18} {:>10} {:>10} {:>12} {:>12} {:>9}",
-        "estimator", "mean deg", "std deg", "paper mean", "paper std", "rejected"
+        "{:<18} {:>10} {:>10} {:>12} {:>12} {:>9} {:>8}",
+        "estimator", "mean deg", "std deg", "paper mean", "paper std", "rejected", "reseeds"
     );
     let rows = r.ukfs.iter().chain(r.particle_filter.iter());
     for e in rows {
@@ -298,13 +331,14 @@ pub fn render(r: &Table2Report) -> String {
         };
         let _ = writeln!(
             out,
-            "{:<18} {:>10.3} {:>10.3} {:>12} {:>12} {:>9}",
+            "{:<18} {:>10.3} {:>10.3} {:>12} {:>12} {:>9} {:>8}",
             e.name,
             e.error.mean(),
             e.error.std(),
             pm,
             ps,
-            e.rejected_steps
+            e.rejected_steps,
+            e.reseeds
         );
     }
     let _ = writeln!(
