@@ -14,7 +14,11 @@ pub struct ConfigError {
 
 impl ConfigError {
     /// Builds an error for `field` holding `value`.
-    pub fn new(field: impl Into<String>, value: impl std::fmt::Display, reason: impl Into<String>) -> Self {
+    pub fn new(
+        field: impl Into<String>,
+        value: impl std::fmt::Display,
+        reason: impl Into<String>,
+    ) -> Self {
         Self {
             field: field.into(),
             value: value.to_string(),

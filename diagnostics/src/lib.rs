@@ -10,6 +10,7 @@
 //! Pure logic: no I/O, no clock (time is passed in), no heap allocation per step.
 
 pub mod error;
+pub mod isolation;
 pub mod verdict;
 
 pub use error::ConfigError;
