@@ -9,7 +9,10 @@
 //!
 //! Pure logic: no I/O, no clock (time is passed in), no heap allocation per step.
 
+pub mod detectors;
+pub mod dtc;
 pub mod error;
+pub mod event;
 pub mod isolation;
 pub mod verdict;
 
