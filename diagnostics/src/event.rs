@@ -51,7 +51,8 @@
 //! | `test_result` | object or null | the [`TestResult`] that caused the change (`verdict` one of `"PASSED"`, `"FAILED"`, `"PRE_PASSED"`, `"PRE_FAILED"`); null for operation-cycle, clear and displacement changes |
 //! | `candidates` | array of `{fault, score}` | the isolation candidates the caller passed with the report, in its order; empty otherwise |
 //!
-//! [`TestResult`]'s limits are plain JSON numbers; a non-finite limit would be written as `null`.
+//! [`TestResult`]'s numbers are plain JSON numbers; a non-finite one is written as `null` and read
+//! back as NaN.
 
 use serde::{Deserialize, Serialize};
 

@@ -2,10 +2,12 @@
 //! codes a vehicle engineer reads.
 //!
 //! - [`verdict`]: what one test step says ([`Verdict`], [`TestResult`], OBD service $06 records).
-//! - detectors on innovations and raw signals;
-//! - isolation over a fault signature matrix;
+//! - [`detectors`]: windowed chi-square on the NIS, two-sided CUSUM, GLR for a mean jump, and
+//!   range/rate checks on raw signals; thresholds derived from false-alarm figures.
+//! - [`isolation`]: a fault signature matrix turning the set of fired tests into ranked fault
+//!   candidates, or "unknown".
 //! - [`dtc`]: SAE J2012 codes, the ISO 14229-1 status byte, debouncing and an AUTOSAR-Dem-shaped
-//!   event memory that emits [`event::DiagnosticEvent`]s.
+//!   event memory that emits [`event::DiagnosticEvent`]s (documented JSON shape).
 //!
 //! Pure logic: no I/O, no clock (time is passed in), no heap allocation per step.
 

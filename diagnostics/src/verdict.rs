@@ -31,13 +31,19 @@ impl Verdict {
 /// One step of a test: its statistic and the band it must stay in. OBD convention: the test
 /// passes when `min <= value <= max`; a residual test reports its statistic with `min = 0` and
 /// `max` = its threshold.
+///
+/// In JSON a non-finite number (a test that did not run has NaN limits) is written as `null`
+/// and read back as NaN, so every result round-trips.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TestResult {
     /// The test statistic (units of the test, e.g. a sum of NIS, or volts for a range check).
+    #[serde(with = "nan_as_null")]
     pub value: f64,
     /// Lower limit.
+    #[serde(with = "nan_as_null")]
     pub min: f64,
     /// Upper limit.
+    #[serde(with = "nan_as_null")]
     pub max: f64,
     /// The verdict for this step.
     pub verdict: Verdict,
@@ -64,6 +70,23 @@ impl TestResult {
             max: self.max,
             passed: self.min <= self.value && self.value <= self.max,
         }
+    }
+}
+
+/// Serde helpers writing non-finite `f64` as `null` and reading `null` as NaN.
+mod nan_as_null {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() {
+            s.serialize_f64(*v)
+        } else {
+            s.serialize_none()
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
     }
 }
 
@@ -99,5 +122,32 @@ mod tests {
         assert!(!TestResult::NOT_TESTED.obd06(0, 0x80, 0).passed);
         assert!(!Verdict::NotTested.tested());
         assert!(Verdict::PreFailed.leans_failed() && !Verdict::PrePassed.leans_failed());
+    }
+
+    #[test]
+    fn json_round_trips_including_untested_results() {
+        let r = TestResult {
+            value: 4.93,
+            min: 0.25,
+            max: 4.75,
+            verdict: Verdict::Failed,
+        };
+        let text = serde_json::to_string(&r).expect("serializes");
+        assert_eq!(
+            text,
+            r#"{"value":4.93,"min":0.25,"max":4.75,"verdict":"FAILED"}"#
+        );
+        assert_eq!(
+            serde_json::from_str::<TestResult>(&text).expect("parses"),
+            r
+        );
+        let text = serde_json::to_string(&TestResult::NOT_TESTED).expect("serializes");
+        assert_eq!(
+            text,
+            r#"{"value":null,"min":null,"max":null,"verdict":"NOT_TESTED"}"#
+        );
+        let back: TestResult = serde_json::from_str(&text).expect("parses");
+        assert!(back.value.is_nan() && back.min.is_nan() && back.max.is_nan());
+        assert_eq!(back.verdict, Verdict::NotTested);
     }
 }
