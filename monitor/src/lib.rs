@@ -1,2 +1,11 @@
-//! fdd-monitor: the runtime a host embeds (signal table, scheduler, monitors, MCAP logs).
-//! Empty until the runtime issue builds it (see shared/DESIGN.md).
+//! fdd-monitor: the runtime a host embeds.
+//!
+//! - [`log`]: MCAP logs with JSON-encoded, JSON-schema-described channels (what fdd reads and
+//!   writes), streamed in log-time order.
+//! - [`signal_table`]: latest value and timestamp per named signal, with staleness detection.
+//! - [`scheduler`] and [`monitor`]: monitors declare their inputs and rate and are stepped at it.
+
+pub mod log;
+pub mod monitor;
+pub mod scheduler;
+pub mod signal_table;

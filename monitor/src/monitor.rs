@@ -1,0 +1,1 @@
+//! The monitor plugin interface.

@@ -1,0 +1,1 @@
+//! Steps each monitor at its own rate as time advances.

@@ -1,0 +1,1 @@
+//! Latest value and timestamp per named signal, with staleness detection.
