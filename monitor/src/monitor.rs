@@ -1,1 +1,66 @@
 //! The monitor plugin interface.
+//!
+//! A monitor is one physical subsystem's diagnosis: it declares the signals it reads and the
+//! period it runs at, owns its estimators, detectors and DTC event memory, and reports what it
+//! finds through [`Output`]s. The runtime ([`crate::scheduler::Scheduler`]) calls
+//! [`Monitor::step`] at the monitor's rate with the current [`SignalTable`].
+
+use fdd_diagnostics::dtc::{Dtc, DtcStatus};
+use fdd_diagnostics::event::DiagnosticEvent;
+use fdd_diagnostics::TestResult;
+
+use crate::signal_table::{SignalId, SignalTable};
+
+/// Something a monitor reports during a step. Borrowed, so reporting allocates nothing; a sink
+/// that keeps an output copies what it needs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Output<'a> {
+    /// An estimate of a physical quantity with its 95 % interval, and where it comes from
+    /// (e.g. the throttle angle in degrees, from `"tps"` or `"wattmeter_estimate"`).
+    Estimate {
+        name: &'a str,
+        value: f64,
+        lower: f64,
+        upper: f64,
+        source: &'a str,
+    },
+    /// One filter's innovation: residual per measurement component, its predicted variance,
+    /// the NIS and its degrees of freedom.
+    Innovation {
+        filter: &'a str,
+        residual: &'a [f64],
+        variance: &'a [f64],
+        nis: f64,
+        dof: usize,
+    },
+    /// One test's result this step.
+    Test { test: &'a str, result: TestResult },
+    /// A DTC's status byte after this step (reported when it changes).
+    DtcStatus { dtc: Dtc, status: DtcStatus },
+    /// A status change of the event memory.
+    Event(&'a DiagnosticEvent),
+}
+
+/// The sink a monitor reports into.
+pub type OutputSink<'s> = dyn FnMut(Output<'_>) + 's;
+
+/// A subsystem diagnosis run by the scheduler.
+pub trait Monitor {
+    /// Short name, used in logs and summaries (`throttle`).
+    fn name(&self) -> &str;
+
+    /// Period between steps (ns).
+    fn period_ns(&self) -> u64;
+
+    /// The signals the monitor reads (for staleness reporting and documentation).
+    fn inputs(&self) -> &[SignalId];
+
+    /// One step at time `now_ns`. Must not allocate in its steady state (no status change).
+    fn step(&mut self, now_ns: u64, signals: &SignalTable, out: &mut OutputSink<'_>);
+
+    /// An operation cycle starts (ignition on, or the start of a replayed log).
+    fn start_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>);
+
+    /// The operation cycle ends (ignition off, or the end of a replayed log).
+    fn end_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>);
+}
