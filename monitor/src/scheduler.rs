@@ -104,12 +104,15 @@ mod tests {
     use std::cell::RefCell;
     use std::rc::Rc;
 
-    /// Records (monitor, step time, value it saw).
+    /// (monitor, step time, value it saw), shared between the probes and the test.
+    type Seen = Rc<RefCell<Vec<(&'static str, u64, Option<f64>)>>>;
+
+    /// Records what each step saw.
     struct Probe {
         name: &'static str,
         period: u64,
         input: SignalId,
-        seen: Rc<RefCell<Vec<(&'static str, u64, Option<f64>)>>>,
+        seen: Seen,
     }
 
     impl Monitor for Probe {

@@ -1,0 +1,384 @@
+//! The JSON schemas (draft 2020-12, MCAP schema encoding `jsonschema`) of fdd's topics.
+//!
+//! They are written by hand, with each field's unit in its `description`, and kept in step with
+//! the serde types in [`super::messages`] by the unit tests below (the properties and required
+//! keys must be exactly the keys serde writes). A non-finite number is written as `null`, so
+//! every `f64` field is `"type": ["number", "null"]`.
+
+/// One topic fdd knows: its channel topic, schema name, JSON schema and a one-line description.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TopicSchema {
+    /// The channel topic, e.g. `/throttle/tps`.
+    pub topic: &'static str,
+    /// The schema record's name, e.g. `fdd.TpsVoltage`.
+    pub schema_name: &'static str,
+    /// The JSON schema text (the schema record's data).
+    pub schema: &'static str,
+    /// What the topic carries.
+    pub description: &'static str,
+}
+
+/// MCAP schema encoding of every fdd schema.
+pub const SCHEMA_ENCODING: &str = "jsonschema";
+/// MCAP message encoding of every fdd channel.
+pub const MESSAGE_ENCODING: &str = "json";
+
+/// `/throttle/motor_voltage`.
+pub const MOTOR_VOLTAGE: TopicSchema = TopicSchema {
+    topic: "/throttle/motor_voltage",
+    schema_name: "fdd.MotorVoltage",
+    description: "voltage applied to the throttle motor (model input u)",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.MotorVoltage",
+  "description": "Voltage applied to the throttle motor (the throttle model's input u). Log time = sample time, ns.",
+  "type": "object",
+  "properties": {
+    "voltage_v": {"type": ["number", "null"], "description": "motor voltage, V; null when not finite"}
+  },
+  "required": ["voltage_v"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/throttle/tps`.
+pub const TPS_VOLTAGE: TopicSchema = TopicSchema {
+    topic: "/throttle/tps",
+    schema_name: "fdd.TpsVoltage",
+    description: "throttle position sensor output voltage",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.TpsVoltage",
+  "description": "Throttle position sensor output. Log time = sample time, ns.",
+  "type": "object",
+  "properties": {
+    "voltage_v": {"type": ["number", "null"], "description": "sensor output voltage, V (0..5 V for 0..90 deg by default); null when not finite"}
+  },
+  "required": ["voltage_v"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/throttle/wattmeter`.
+pub const WATTMETER: TopicSchema = TopicSchema {
+    topic: "/throttle/wattmeter",
+    schema_name: "fdd.Wattmeter",
+    description: "wattmeter on the throttle motor supply: power i^2 into 1 ohm",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.Wattmeter",
+  "description": "Wattmeter on the throttle motor supply. Log time = sample time, ns.",
+  "type": "object",
+  "properties": {
+    "power_w": {"type": ["number", "null"], "description": "motor power i^2 into 1 ohm, W (numerically the squared motor current, A^2), with measurement noise; null when not finite"}
+  },
+  "required": ["power_w"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/truth/throttle`.
+pub const THROTTLE_TRUTH: TopicSchema = TopicSchema {
+    topic: "/truth/throttle",
+    schema_name: "fdd.ThrottleTruth",
+    description: "simulated truth (fixtures only): angle, velocity, current, active fault",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.ThrottleTruth",
+  "description": "Simulated throttle truth, written by fixtures only. Log time = sample time, ns.",
+  "type": "object",
+  "properties": {
+    "angle_deg": {"type": ["number", "null"], "description": "true plate angle, deg (0 closed .. 90 wide open)"},
+    "velocity": {"type": ["number", "null"], "description": "true plate angular velocity rho, in the identified throttle model's own units"},
+    "current_a": {"type": ["number", "null"], "description": "true motor current, A"},
+    "fault": {"type": "string", "description": "scenario fault name, e.g. none, tps_stuck"},
+    "fault_active": {"type": "boolean", "description": "whether the fault is active at this sample"}
+  },
+  "required": ["angle_deg", "velocity", "current_a", "fault", "fault_active"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/fdd/throttle/position`.
+pub const POSITION_ESTIMATE: TopicSchema = TopicSchema {
+    topic: "/fdd/throttle/position",
+    schema_name: "fdd.PositionEstimate",
+    description: "throttle position output with its 95% interval and source",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.PositionEstimate",
+  "description": "fdd's throttle position output. Log time = time of the sample it is computed from, ns.",
+  "type": "object",
+  "properties": {
+    "angle_deg": {"type": ["number", "null"], "description": "estimated plate angle, deg; null when no estimate is available"},
+    "lower_deg": {"type": ["number", "null"], "description": "lower end of the 95% interval, deg"},
+    "upper_deg": {"type": ["number", "null"], "description": "upper end of the 95% interval, deg"},
+    "source": {"type": "string", "description": "tps (position sensor) or wattmeter_estimate (wattmeter UKF, sensor diagnosed faulty)"}
+  },
+  "required": ["angle_deg", "lower_deg", "upper_deg", "source"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/fdd/throttle/innovation`.
+pub const INNOVATION: TopicSchema = TopicSchema {
+    topic: "/fdd/throttle/innovation",
+    schema_name: "fdd.Innovation",
+    description: "per-filter innovation, its variance and NIS",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.Innovation",
+  "description": "One filter's innovation after an update. Log time = sample time, ns.",
+  "type": "object",
+  "properties": {
+    "filter": {"type": "string", "description": "filter name, as configured"},
+    "residual": {"type": "array", "items": {"type": ["number", "null"]}, "description": "innovation y - h(x) per measurement component, in its units (V position sensor, W wattmeter)"},
+    "variance": {"type": "array", "items": {"type": ["number", "null"]}, "description": "innovation variance per component (diagonal of S), squared measurement units (V^2, W^2)"},
+    "nis": {"type": ["number", "null"], "description": "normalized innovation squared r' S^-1 r, dimensionless"},
+    "dof": {"type": "integer", "minimum": 0, "maximum": 4294967295, "description": "degrees of freedom of nis (measurement components used)"}
+  },
+  "required": ["filter", "residual", "variance", "nis", "dof"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/fdd/tests`.
+pub const TEST_STATISTIC: TopicSchema = TopicSchema {
+    topic: "/fdd/tests",
+    schema_name: "fdd.TestStatistic",
+    description: "one step of one statistical test: statistic, limits, verdict",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.TestStatistic",
+  "description": "One step of one test (OBD $06 convention: passed when min <= value <= max). Log time = sample time, ns.",
+  "type": "object",
+  "properties": {
+    "test": {"type": "string", "description": "test name, as configured"},
+    "value": {"type": ["number", "null"], "description": "test statistic, in the test's units (dimensionless for NIS tests, V for a voltage range check); null when the test did not run"},
+    "min": {"type": ["number", "null"], "description": "lower limit, same units"},
+    "max": {"type": ["number", "null"], "description": "upper limit (threshold), same units"},
+    "verdict": {"type": "string", "enum": ["NOT_TESTED", "PASSED", "FAILED", "PRE_PASSED", "PRE_FAILED"], "description": "the step's verdict"}
+  },
+  "required": ["test", "value", "min", "max", "verdict"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/fdd/dtc_status`.
+pub const DTC_STATUS: TopicSchema = TopicSchema {
+    topic: "/fdd/dtc_status",
+    schema_name: "fdd.DtcStatus",
+    description: "a DTC's ISO 14229-1 status byte, on change",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.DtcStatus",
+  "description": "A DTC's ISO 14229-1 status byte, written when it changes. Log time = time of the change, ns.",
+  "type": "object",
+  "properties": {
+    "dtc": {"type": "string", "pattern": "^[PCBU][0-3][0-9A-F]{3}-[0-9A-F]{2}$", "description": "UDS DTC as J2012 code and failure type byte, e.g. P0123-1C"},
+    "status": {"type": "integer", "minimum": 0, "maximum": 255, "description": "status byte: bit 0 testFailed, 1 testFailedThisOperationCycle, 2 pendingDTC, 3 confirmedDTC, 4 testNotCompletedSinceLastClear, 5 testFailedSinceLastClear, 6 testNotCompletedThisOperationCycle, 7 warningIndicatorRequested"}
+  },
+  "required": ["dtc", "status"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/fdd/events`: `fdd_diagnostics::event::DiagnosticEvent`, as documented there.
+pub const DIAGNOSTIC_EVENT: TopicSchema = TopicSchema {
+    topic: "/fdd/events",
+    schema_name: "fdd.DiagnosticEvent",
+    description: "diagnostic events: one per DTC status change (fdd_diagnostics::event)",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.DiagnosticEvent",
+  "description": "One DTC status change (fdd_diagnostics::event::DiagnosticEvent). Log time = time_s in ns.",
+  "type": "object",
+  "properties": {
+    "time_s": {"type": "number", "description": "time of the report or operation-cycle call that caused the change, s"},
+    "event": {"type": "string", "description": "configured event name"},
+    "dtc": {"type": "string", "pattern": "^[PCBU][0-3][0-9A-F]{3}-[0-9A-F]{2}$", "description": "UDS DTC as J2012 code and failure type byte, e.g. P0123-1C"},
+    "dtc_uds": {"type": "integer", "minimum": 0, "maximum": 16777215, "description": "the same DTC as the 3-byte UDS value"},
+    "trigger": {"type": "string", "enum": ["test_result", "operation_cycle_start", "operation_cycle_end", "clear_dtc", "displacement"], "description": "what caused the change"},
+    "status_before": {"type": "integer", "minimum": 0, "maximum": 255, "description": "ISO 14229-1 status byte before"},
+    "status_after": {"type": "integer", "minimum": 0, "maximum": 255, "description": "ISO 14229-1 status byte after"},
+    "changed": {
+      "type": "array",
+      "items": {"type": "string", "enum": ["testFailed", "testFailedThisOperationCycle", "pendingDTC", "confirmedDTC", "testNotCompletedSinceLastClear", "testFailedSinceLastClear", "testNotCompletedThisOperationCycle", "warningIndicatorRequested"]},
+      "description": "names of the status bits that differ, bit 0 first"
+    },
+    "fdc": {"type": "integer", "minimum": -128, "maximum": 127, "description": "fault detection counter after the change"},
+    "occurrence_counter": {"type": "integer", "minimum": 0, "maximum": 255, "description": "qualified failures since the last clear or aging"},
+    "aging_counter": {"type": "integer", "minimum": 0, "maximum": 255, "description": "aging cycles counted so far"},
+    "memory": {"type": "string", "enum": ["unchanged", "stored", "not_stored", "displaced", "aged", "cleared"], "description": "what happened to the event memory entry"},
+    "displaced": {"type": ["string", "null"], "pattern": "^[PCBU][0-3][0-9A-F]{3}-[0-9A-F]{2}$", "description": "with memory = stored: the DTC whose entry this one displaced"},
+    "freeze_frame": {
+      "type": "array",
+      "items": {
+        "type": "object",
+        "properties": {
+          "signal": {"type": "string", "description": "signal name, as configured"},
+          "value": {"type": ["number", "null"], "description": "value at capture, in the signal's units; null when it had no finite value"}
+        },
+        "required": ["signal", "value"],
+        "additionalProperties": false
+      },
+      "description": "the entry's freeze frame"
+    },
+    "test_result": {
+      "type": ["object", "null"],
+      "properties": {
+        "value": {"type": ["number", "null"], "description": "test statistic, in the test's units"},
+        "min": {"type": ["number", "null"], "description": "lower limit"},
+        "max": {"type": ["number", "null"], "description": "upper limit"},
+        "verdict": {"type": "string", "enum": ["NOT_TESTED", "PASSED", "FAILED", "PRE_PASSED", "PRE_FAILED"]}
+      },
+      "required": ["value", "min", "max", "verdict"],
+      "additionalProperties": false,
+      "description": "the test result that caused the change; null for operation-cycle, clear and displacement changes"
+    },
+    "candidates": {
+      "type": "array",
+      "items": {
+        "type": "object",
+        "properties": {
+          "fault": {"type": "string", "description": "fault name"},
+          "score": {"type": "number", "description": "isolation score (higher is more likely)"}
+        },
+        "required": ["fault", "score"],
+        "additionalProperties": false
+      },
+      "description": "isolation candidates passed with the report, in its order"
+    }
+  },
+  "required": ["time_s", "event", "dtc", "dtc_uds", "trigger", "status_before", "status_after", "changed", "fdc", "occurrence_counter", "aging_counter", "memory", "displaced", "freeze_frame", "test_result", "candidates"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// Every built-in topic, inputs first.
+pub const TOPICS: [&TopicSchema; 9] = [
+    &MOTOR_VOLTAGE,
+    &TPS_VOLTAGE,
+    &WATTMETER,
+    &THROTTLE_TRUTH,
+    &POSITION_ESTIMATE,
+    &INNOVATION,
+    &TEST_STATISTIC,
+    &DTC_STATUS,
+    &DIAGNOSTIC_EVENT,
+];
+
+/// The built-in topic named `topic`, if any.
+pub fn builtin_topic(topic: &str) -> Option<&'static TopicSchema> {
+    TOPICS.iter().copied().find(|t| t.topic == topic)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::log::messages::*;
+    use fdd_diagnostics::event::DiagnosticEvent;
+    use serde_json::Value;
+
+    fn keys_of(v: &Value) -> Vec<String> {
+        let mut k: Vec<String> = v.as_object().unwrap().keys().cloned().collect();
+        k.sort();
+        k
+    }
+
+    /// The schema's properties and required list are exactly the keys serde writes.
+    fn check<T: TopicMessage>(example: &T) {
+        let schema: Value = serde_json::from_str(T::SCHEMA.schema)
+            .unwrap_or_else(|e| panic!("{}: schema is not JSON: {e}", T::SCHEMA.schema_name));
+        assert_eq!(schema["title"], T::SCHEMA.schema_name);
+        assert_eq!(schema["additionalProperties"], false);
+        let written = serde_json::to_value(example).unwrap();
+        let props = keys_of(&schema["properties"]);
+        assert_eq!(props, keys_of(&written), "{}", T::SCHEMA.schema_name);
+        let mut required: Vec<String> = schema["required"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_str().unwrap().to_string())
+            .collect();
+        required.sort();
+        assert_eq!(required, props, "{}", T::SCHEMA.schema_name);
+        for (name, p) in schema["properties"].as_object().unwrap() {
+            assert!(
+                p.get("description").is_some() || p.get("enum").is_some(),
+                "{}.{name} has no description",
+                T::SCHEMA.schema_name
+            );
+        }
+    }
+
+    #[test]
+    fn schemas_match_the_serde_types() {
+        check(&MotorVoltage { voltage_v: 1.0 });
+        check(&TpsVoltage { voltage_v: 1.0 });
+        check(&Wattmeter { power_w: 1.0 });
+        check(&ThrottleTruth {
+            angle_deg: 1.0,
+            velocity: 0.0,
+            current_a: 0.1,
+            fault: "none".into(),
+            fault_active: false,
+        });
+        check(&PositionEstimate {
+            angle_deg: 1.0,
+            lower_deg: 0.5,
+            upper_deg: 1.5,
+            source: "tps".into(),
+        });
+        check(&InnovationMsg {
+            filter: "f".into(),
+            residual: vec![0.1],
+            variance: vec![1.0],
+            nis: 0.01,
+            dof: 1,
+        });
+        check(&TestStatistic {
+            test: "t".into(),
+            value: 1.0,
+            min: 0.0,
+            max: 2.0,
+            verdict: "PASSED".into(),
+        });
+        check(&DtcStatusMsg {
+            dtc: "P0123-1C".into(),
+            status: 0x27,
+        });
+        let event: DiagnosticEvent = serde_json::from_str(
+            r#"{"time_s": 12.5, "event": "tps_a_high", "dtc": "P0123-1C", "dtc_uds": 74524,
+                "trigger": "test_result", "status_before": 80, "status_after": 39,
+                "changed": ["testFailed"], "fdc": 127, "occurrence_counter": 1,
+                "aging_counter": 0, "memory": "stored", "displaced": null,
+                "freeze_frame": [{"signal": "tps_a_v", "value": 4.93}],
+                "test_result": {"value": 4.93, "min": 0.25, "max": 4.75, "verdict": "FAILED"},
+                "candidates": [{"fault": "tps_a_bias", "score": 0.09}]}"#,
+        )
+        .unwrap();
+        check(&event);
+    }
+
+    #[test]
+    fn topics_are_unique_and_found() {
+        for (i, a) in TOPICS.iter().enumerate() {
+            assert_eq!(builtin_topic(a.topic), Some(*a));
+            for b in &TOPICS[i + 1..] {
+                assert_ne!(a.topic, b.topic);
+                assert_ne!(a.schema_name, b.schema_name);
+            }
+        }
+        assert_eq!(builtin_topic("/nope"), None);
+    }
+}
