@@ -4,4 +4,5 @@
 
 pub mod config;
 pub mod reproduce;
+pub mod simulate;
 pub mod stats;

@@ -20,6 +20,15 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Simulate a scenario (truth, sensors, injected fault) and write it as an MCAP log.
+    Simulate {
+        /// Scenario: a path to a scenario TOML file, or the name of a file in fixtures/scenarios
+        /// (e.g. `throttle_tps_stuck`).
+        scenario: String,
+        /// Output MCAP file.
+        #[arg(short, long)]
+        out: PathBuf,
+    },
     /// Reproduce a result from one of the source papers.
     Reproduce {
         #[command(subcommand)]
@@ -52,6 +61,16 @@ enum Reproduce {
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        Command::Simulate { scenario, out } => {
+            let stats = fdd::simulate::simulate(&scenario, &out)?;
+            println!(
+                "wrote {}: {} frames, {} messages",
+                out.display(),
+                stats.frames,
+                stats.messages
+            );
+            Ok(())
+        }
         Command::Reproduce { what } => match what {
             Reproduce::Table2 {
                 samples,

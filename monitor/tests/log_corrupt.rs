@@ -21,6 +21,7 @@ fn small_file(compression: ChunkCompression) -> Vec<u8> {
         WriteOptions {
             chunk_size: 400,
             compression,
+            ..WriteOptions::default()
         },
         |w| {
             write_examples(w, 0)?;
@@ -43,6 +44,7 @@ fn tiny_file() -> Vec<u8> {
         WriteOptions {
             chunk_size: 300,
             compression: ChunkCompression::Zstd { level: 3 },
+            ..WriteOptions::default()
         },
         |w| {
             for k in 0..40u64 {

@@ -135,13 +135,14 @@ fn the_same_messages_give_byte_identical_files() {
 }
 
 #[test]
-fn uncompressed_files_read_back_too() {
+fn uncompressed_files_without_message_indexes_read_back_too() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("plain.mcap");
     let bytes = to_bytes(
         WriteOptions {
             chunk_size: 300,
             compression: ChunkCompression::None,
+            message_indexes: false,
         },
         |w| write_inputs(w, 100),
     );
