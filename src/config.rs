@@ -61,13 +61,16 @@ pub struct WattmeterUkfConfig {
 }
 
 /// The whole throttle file.
-#[derive(Debug, Clone, Copy, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ThrottleConfig {
     pub model: ThrottleParams,
     pub position_sensor: PositionSensorConfig,
     pub truth: TruthConfig,
     pub wattmeter_ukf: WattmeterUkfConfig,
+    /// `[monitor]`: the throttle monitor; every key has a default.
+    #[serde(default)]
+    pub monitor: fdd_monitor::throttle::ThrottleMonitorConfig,
 }
 
 impl ThrottleConfig {

@@ -9,3 +9,4 @@ pub mod log;
 pub mod monitor;
 pub mod scheduler;
 pub mod signal_table;
+pub mod throttle;

@@ -1,0 +1,109 @@
+//! Settings of the throttle monitor (`[monitor]` in `config/throttle.toml`). Every key has a
+//! default, so the table may be partial or absent.
+
+use serde::Deserialize;
+
+/// Throttle monitor settings. Units in the key names; `_v` volts, `_deg` degrees, `_s` seconds.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ThrottleMonitorConfig {
+    /// Runtime signal names of the motor voltage, the position sensor and the wattmeter.
+    pub motor_voltage_signal: String,
+    pub tps_signal: String,
+    pub wattmeter_signal: String,
+    /// Step period, s (the model's sampling period).
+    pub period_s: f64,
+    /// TPS noise standard deviation used as R (V): electrical noise and ADC quantization.
+    pub tps_noise_v: f64,
+    /// Wattmeter noise standard deviation (W); R = std^2 + `wattmeter_r_floor`.
+    pub wattmeter_noise_w: f64,
+    pub wattmeter_r_floor: f64,
+    /// A TPS reading at or below `rail_low_v` (at or above `rail_high_v`) is a circuit-low
+    /// (high) candidate when the model puts the plate more than `rail_margin_deg` (plus 3
+    /// predicted standard deviations) away from the stop that reading would mean.
+    pub rail_low_v: f64,
+    pub rail_high_v: f64,
+    pub rail_margin_deg: f64,
+    /// Implausible rail readings lasting this long are an open circuit / short (s).
+    pub rail_persist_s: f64,
+    /// Shorter episodes are dropouts; this many within `intermittent_window_s` are an
+    /// intermittent circuit.
+    pub intermittent_count: usize,
+    pub intermittent_window_s: f64,
+    /// Identical TPS readings in a row that make the signal frozen (a healthy sensor's noise
+    /// toggles the ADC code).
+    pub frozen_samples: u32,
+    /// TPS innovation gate: a TPS sample whose NIS in the TPS filter exceeds this is kept out of
+    /// the combined filter.
+    pub tps_gate_nis: f64,
+    /// Jump/noise test: sum of the TPS filter's NIS (each capped at `nis_cap`) over `window`
+    /// samples, failed above `threshold`.
+    pub tps_nis_window: usize,
+    pub tps_nis_cap: f64,
+    pub tps_nis_threshold: f64,
+    /// CUSUM on the TPS filter's normalized innovation: smallest bias (sigma) and threshold.
+    pub tps_cusum_min_bias_sigma: f64,
+    pub tps_cusum_threshold: f64,
+    /// CUSUM on the combined filter's wattmeter innovation.
+    pub watt_cusum_min_bias_sigma: f64,
+    pub watt_cusum_threshold: f64,
+    /// Normalized innovations are clipped to +-this before the CUSUMs (robust to the model's
+    /// rare mode-switch outliers).
+    pub cusum_clip_sigma: f64,
+    /// After the first test fails, the monitor waits this long for the other tests before it
+    /// names the fault (s).
+    pub decision_window_s: f64,
+    /// Plate-stuck test: over `motion_window_s`, the TPS spans less than
+    /// `static_tps_range_deg` while the static map of the applied voltage spans more than
+    /// `driven_range_deg`, or sits more than that away from the TPS angle.
+    pub motion_window_s: f64,
+    pub static_tps_range_deg: f64,
+    pub driven_range_deg: f64,
+    /// DTCs (J2012 code and failure type byte).
+    pub dtc_tps_low: String,
+    pub dtc_tps_high: String,
+    pub dtc_tps_performance: String,
+    pub dtc_tps_intermittent: String,
+    pub dtc_plate_stuck: String,
+    pub dtc_wattmeter: String,
+}
+
+impl Default for ThrottleMonitorConfig {
+    fn default() -> Self {
+        Self {
+            motor_voltage_signal: "motor_voltage".into(),
+            tps_signal: "tps".into(),
+            wattmeter_signal: "wattmeter".into(),
+            period_s: 0.001,
+            tps_noise_v: 0.0052,
+            wattmeter_noise_w: 0.1,
+            wattmeter_r_floor: 0.01,
+            rail_low_v: 0.03,
+            rail_high_v: 4.97,
+            rail_margin_deg: 2.0,
+            rail_persist_s: 0.02,
+            intermittent_count: 3,
+            intermittent_window_s: 2.0,
+            frozen_samples: 40,
+            tps_gate_nis: 400.0,
+            tps_nis_window: 10,
+            tps_nis_cap: 5000.0,
+            tps_nis_threshold: 800.0,
+            tps_cusum_min_bias_sigma: 1.0,
+            tps_cusum_threshold: 40.0,
+            watt_cusum_min_bias_sigma: 0.5,
+            watt_cusum_threshold: 35.0,
+            cusum_clip_sigma: 8.0,
+            decision_window_s: 0.2,
+            motion_window_s: 0.2,
+            static_tps_range_deg: 1.0,
+            driven_range_deg: 15.0,
+            dtc_tps_low: "P0122-16".into(),
+            dtc_tps_high: "P0123-17".into(),
+            dtc_tps_performance: "P0121-64".into(),
+            dtc_tps_intermittent: "P0124-1F".into(),
+            dtc_plate_stuck: "P2119-71".into(),
+            dtc_wattmeter: "P1651-64".into(),
+        }
+    }
+}

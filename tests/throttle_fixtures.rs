@@ -1,0 +1,237 @@
+//! The throttle monitor end to end on the committed MCAP fixtures: each fault raises its DTC
+//! family and no other, within the detection-delay bound; after a position-sensor
+//! failure the output comes from the wattmeter estimate and stays within 7 deg (std) of the
+//! truth; a wattmeter or plate fault never switches the output; nominal data raises nothing,
+//! including one hour generated here (not committed) with varied excitation.
+
+use std::path::Path;
+
+use fdd::config::ThrottleConfig;
+use fdd_estimators::models::throttle::ThrottleModel;
+use fdd_fixtures::scenario::Scenario;
+use fdd_fixtures::throttle_sim::{ThrottlePlant, ThrottleSim};
+use fdd_monitor::log::LogReader;
+use fdd_monitor::monitor::Output;
+use fdd_monitor::scheduler::Scheduler;
+use fdd_monitor::signal_table::{SignalSpec, SignalTable};
+use fdd_monitor::throttle::ThrottleMonitor;
+
+/// What one run produced.
+#[derive(Debug, Default)]
+struct Run {
+    /// (time s, DTC) each time testFailed went 0 -> 1.
+    raised: Vec<(f64, String)>,
+    /// Time of the first estimate from the wattmeter.
+    switched_s: Option<f64>,
+    /// Estimate error against truth after the switch: n, sum, sum of squares.
+    err: (u64, f64, f64),
+    fault_onset_s: Option<f64>,
+}
+
+impl Run {
+    fn err_std(&self) -> f64 {
+        let n = self.err.0.max(1) as f64;
+        let m = self.err.1 / n;
+        (self.err.2 / n - m * m).max(0.0).sqrt()
+    }
+}
+
+fn table() -> SignalTable {
+    SignalTable::new(
+        ["motor_voltage", "tps", "wattmeter"]
+            .iter()
+            .map(|n| SignalSpec {
+                name: n.to_string(),
+                max_age_ns: 5_000_000,
+            })
+            .collect(),
+    )
+    .expect("valid table")
+}
+
+/// Feeds `(t_ns, u, tps, watt, truth_angle, fault_active)` samples through the monitor.
+fn run(samples: impl Iterator<Item = (u64, f64, f64, f64, f64, bool)>) -> Run {
+    let cfg = ThrottleConfig::load(None).expect("embedded config");
+    let model = ThrottleModel::new(cfg.model).expect("model");
+    let mut table = table();
+    let ids = ["motor_voltage", "tps", "wattmeter"].map(|n| table.id(n).expect("declared"));
+    let monitor = ThrottleMonitor::new(
+        model,
+        cfg.position_sensor.full_scale_v,
+        cfg.position_sensor.full_scale_deg,
+        &cfg.monitor,
+        &table,
+    )
+    .expect("monitor builds");
+    let mut sched = Scheduler::new(0);
+    sched.add(Box::new(monitor)).expect("schedules");
+    let out = std::cell::RefCell::new(Run::default());
+    let truth = std::cell::Cell::new(0.0);
+    let now = std::cell::Cell::new(0.0);
+    let mut sink = |o: Output<'_>| {
+        let mut r = out.borrow_mut();
+        match o {
+            Output::Event(e) => {
+                if e.status_after.byte() & 1 == 1 && e.status_before.byte() & 1 == 0 {
+                    r.raised.push((e.time_s, e.dtc.to_string()));
+                }
+            }
+            Output::Estimate { value, source, .. } if source == "wattmeter_estimate" => {
+                r.switched_s.get_or_insert(now.get());
+                let d = value - truth.get();
+                r.err.0 += 1;
+                r.err.1 += d;
+                r.err.2 += d * d;
+            }
+            _ => {}
+        }
+    };
+    sched.start_operation_cycle(0, &mut sink);
+    let mut last = 0;
+    for (t, u, tps, watt, angle, active) in samples {
+        sched.run_until(t, &table, &mut sink);
+        table.set(ids[0], t, u).expect("u");
+        table.set(ids[1], t, tps).expect("tps");
+        table.set(ids[2], t, watt).expect("wattmeter");
+        truth.set(angle);
+        now.set(t as f64 * 1e-9);
+        if active && out.borrow().fault_onset_s.is_none() {
+            out.borrow_mut().fault_onset_s = Some(t as f64 * 1e-9);
+        }
+        last = t;
+    }
+    sched.run_until(last + 1, &table, &mut sink);
+    sched.end_operation_cycle(last + 1, &mut sink);
+    out.into_inner()
+}
+
+/// Replays a committed fixture, frame by frame from its MCAP topics.
+fn run_fixture(name: &str) -> Run {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("fixtures/data/{name}.mcap"));
+    let mut reader = LogReader::open(&path).expect("fixture opens");
+    let mut frames = Vec::new();
+    let mut cur: (u64, [f64; 4], bool) = (u64::MAX, [f64::NAN; 4], false);
+    while let Some(msg) = reader.next_message() {
+        let msg = msg.expect("valid message");
+        if msg.log_time_ns != cur.0 {
+            if cur.0 != u64::MAX {
+                frames.push((cur.0, cur.1[0], cur.1[1], cur.1[2], cur.1[3], cur.2));
+            }
+            cur = (msg.log_time_ns, [f64::NAN; 4], false);
+        }
+        match msg.topic {
+            "/throttle/motor_voltage" => cur.1[0] = msg.field_f64("voltage_v").expect("u"),
+            "/throttle/tps" => cur.1[1] = msg.field_f64("voltage_v").expect("tps"),
+            "/throttle/wattmeter" => cur.1[2] = msg.field_f64("power_w").expect("watt"),
+            "/truth/throttle" => {
+                cur.1[3] = msg.field_f64("angle_deg").expect("angle");
+                cur.2 = msg.json().expect("json")["fault_active"] == serde_json::Value::Bool(true);
+            }
+            _ => {}
+        }
+    }
+    frames.push((cur.0, cur.1[0], cur.1[1], cur.1[2], cur.1[3], cur.2));
+    run(frames.into_iter())
+}
+
+/// Checks one fault fixture: the DTC family, the delay bound, the switch and the error after it.
+fn check(name: &str, family: &str, max_delay_ms: f64, switches: bool) {
+    let r = run_fixture(name);
+    let onset = r.fault_onset_s.expect("fixture has a fault");
+    println!(
+        "{name}: raised {:?}, switched at {:?}, error after switch std {:.2} deg over {} samples",
+        r.raised,
+        r.switched_s,
+        r.err_std(),
+        r.err.0
+    );
+    assert!(!r.raised.is_empty(), "{name}: no DTC raised");
+    for (t, dtc) in &r.raised {
+        assert!(
+            dtc.starts_with(family),
+            "{name}: raised {dtc}, expected only {family}"
+        );
+        assert!(
+            *t >= onset,
+            "{name}: {dtc} raised at {t} s before the fault ({onset} s)"
+        );
+    }
+    let delay_ms = (r.raised[0].0 - onset) * 1e3;
+    println!("{name}: detection delay {delay_ms:.0} ms (bound {max_delay_ms} ms)");
+    assert!(
+        delay_ms <= max_delay_ms,
+        "{name}: delay {delay_ms:.0} ms > {max_delay_ms} ms"
+    );
+    if switches {
+        let t = r.switched_s.expect("switched to the wattmeter estimate");
+        assert!(
+            (t - r.raised[0].0).abs() <= 0.0011,
+            "{name}: switch at {t}, DTC at {}",
+            r.raised[0].0
+        );
+        assert!(
+            r.err_std() <= 7.0,
+            "{name}: error std after switch {:.2} deg",
+            r.err_std()
+        );
+    } else {
+        assert_eq!(
+            r.switched_s, None,
+            "{name}: must not switch to the wattmeter estimate"
+        );
+    }
+}
+
+#[test]
+fn nominal_fixture_raises_nothing() {
+    let r = run_fixture("throttle_nominal");
+    assert!(r.raised.is_empty(), "{:?}", r.raised);
+    assert_eq!(r.switched_s, None);
+}
+
+#[test]
+fn open_and_short_circuits() {
+    check("throttle_tps_open", "P0122", 50.0, true);
+    check("throttle_tps_short", "P0123", 50.0, true);
+}
+
+#[test]
+fn bias_stuck_drift_and_noise_are_range_performance() {
+    check("throttle_tps_bias", "P0121", 300.0, true);
+    check("throttle_tps_stuck", "P0121", 500.0, true);
+    check("throttle_tps_drift", "P0121", 5000.0, true);
+    check("throttle_tps_noise", "P0121", 2000.0, true);
+}
+
+#[test]
+fn intermittent_dropouts() {
+    check("throttle_tps_intermittent", "P0124", 2000.0, true);
+}
+
+#[test]
+fn wattmeter_and_plate_faults_do_not_switch() {
+    check("throttle_wattmeter", "P1651", 2000.0, false);
+    check("throttle_plate_stuck", "P2119", 1000.0, false);
+}
+
+#[test]
+fn one_hour_nominal_at_1khz_raises_nothing() {
+    let plant = ThrottlePlant::from_default_config().expect("plant");
+    let sc = Scenario::nominal_throttle("hour", 3600.0, 2024);
+    let sim = ThrottleSim::new(&sc, &plant).expect("sim");
+    let r = run(sim.map(|f| {
+        (
+            f.t_ns,
+            f.motor_voltage_v,
+            f.tps_v,
+            f.wattmeter_w,
+            f.truth_angle_deg,
+            f.fault_active,
+        )
+    }));
+    assert!(
+        r.raised.is_empty(),
+        "false alarms in one hour: {:?}",
+        r.raised
+    );
+}
