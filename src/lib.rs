@@ -1,8 +1,10 @@
-//! The `fdd` package: configuration loading and the paper reproductions behind the `fdd` CLI.
+//! The `fdd` package: configuration loading, log replay and the paper reproductions behind the
+//! `fdd` CLI.
 //! The filters, models and simulators live in the workspace crates (`fdd-estimators`,
 //! `fdd-fixtures`, ...); this crate wires them to files and commands.
 
 pub mod config;
+pub mod replay;
 pub mod reproduce;
 pub mod simulate;
 pub mod stats;

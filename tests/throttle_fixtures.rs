@@ -71,12 +71,16 @@ fn run(samples: impl Iterator<Item = (u64, f64, f64, f64, f64, bool)>) -> Run {
     let mut sink = |o: Output<'_>| {
         let mut r = out.borrow_mut();
         match o {
-            Output::Event(e) => {
-                if e.status_after.byte() & 1 == 1 && e.status_before.byte() & 1 == 0 {
-                    r.raised.push((e.time_s, e.dtc.to_string()));
-                }
+            Output::Event(e)
+                if e.status_after.byte() & 1 == 1 && e.status_before.byte() & 1 == 0 =>
+            {
+                r.raised.push((e.time_s, e.dtc.to_string()));
             }
-            Output::Estimate { value, source, .. } if source == "wattmeter_estimate" => {
+            Output::Estimate {
+                value,
+                source: "wattmeter_estimate",
+                ..
+            } => {
                 r.switched_s.get_or_insert(now.get());
                 let d = value - truth.get();
                 r.err.0 += 1;
@@ -146,9 +150,11 @@ fn check(name: &str, family: &str, max_delay_ms: f64, switches: bool) {
         r.err.0
     );
     assert!(!r.raised.is_empty(), "{name}: no DTC raised");
+    // The fault's family, plus P2106 (forced limited power) exactly when the output switches.
     for (t, dtc) in &r.raised {
+        let fallback = dtc.starts_with("P2106");
         assert!(
-            dtc.starts_with(family),
+            dtc.starts_with(family) || (fallback && switches),
             "{name}: raised {dtc}, expected only {family}"
         );
         assert!(
@@ -156,6 +162,11 @@ fn check(name: &str, family: &str, max_delay_ms: f64, switches: bool) {
             "{name}: {dtc} raised at {t} s before the fault ({onset} s)"
         );
     }
+    assert_eq!(
+        r.raised.iter().any(|(_, d)| d.starts_with("P2106")),
+        switches,
+        "{name}: the switch to the wattmeter estimate is reported as P2106 exactly when it happens"
+    );
     let delay_ms = (r.raised[0].0 - onset) * 1e3;
     println!("{name}: detection delay {delay_ms:.0} ms (bound {max_delay_ms} ms)");
     assert!(

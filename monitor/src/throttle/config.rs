@@ -66,6 +66,8 @@ pub struct ThrottleMonitorConfig {
     pub dtc_tps_intermittent: String,
     pub dtc_plate_stuck: String,
     pub dtc_wattmeter: String,
+    /// Raised when the position output switches to the wattmeter estimate (limp home).
+    pub dtc_position_fallback: String,
 }
 
 impl Default for ThrottleMonitorConfig {
@@ -104,6 +106,7 @@ impl Default for ThrottleMonitorConfig {
             dtc_tps_intermittent: "P0124-1F".into(),
             dtc_plate_stuck: "P2119-71".into(),
             dtc_wattmeter: "P1651-64".into(),
+            dtc_position_fallback: "P2106-00".into(),
         }
     }
 }

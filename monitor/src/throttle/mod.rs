@@ -95,15 +95,21 @@ impl ThrottleFault {
     }
 }
 
-/// Event names, in the order of the DTC settings.
-pub const EVENT_NAMES: [&str; 6] = [
+/// Event names, in the order of the DTC settings. The last one is the switch of the position
+/// output to the wattmeter estimate, reported as "forced limited power" (P2106 by default), so
+/// the switch is itself a diagnostic event with a status byte.
+pub const EVENT_NAMES: [&str; 7] = [
     "tps_circuit_low",
     "tps_circuit_high",
     "tps_range_performance",
     "tps_intermittent",
     "throttle_plate_stuck",
     "wattmeter_plausibility",
+    "position_from_wattmeter",
 ];
+
+/// Index of the switch event in [`EVENT_NAMES`].
+const SWITCH_EVENT: usize = 6;
 
 /// Errors building the monitor.
 #[derive(Debug, thiserror::Error)]
@@ -210,8 +216,8 @@ pub struct ThrottleMonitor {
     tps_failed: bool,
     watt_failed: bool,
     memory: EventMemory,
-    event_ids: [EventId; 6],
-    statuses: [u8; 6],
+    event_ids: [EventId; 7],
+    statuses: [u8; 7],
 }
 
 impl ThrottleMonitor {
@@ -306,6 +312,7 @@ impl ThrottleMonitor {
             &cfg.dtc_tps_intermittent,
             &cfg.dtc_plate_stuck,
             &cfg.dtc_wattmeter,
+            &cfg.dtc_position_fallback,
         ];
         let events = EVENT_NAMES
             .iter()
@@ -330,7 +337,7 @@ impl ThrottleMonitor {
         })?;
         let mut event_ids = [memory
             .event_id(EVENT_NAMES[0])
-            .ok_or_else(|| setting("dtc", "event missing"))?; 6];
+            .ok_or_else(|| setting("dtc", "event missing"))?; 7];
         for (i, name) in EVENT_NAMES.iter().enumerate() {
             event_ids[i] = memory
                 .event_id(name)
@@ -372,7 +379,7 @@ impl ThrottleMonitor {
             decided: None,
             tps_failed: false,
             watt_failed: false,
-            statuses: [0x50; 6],
+            statuses: [0x50; 7],
             memory,
             event_ids,
             inputs,
@@ -391,7 +398,7 @@ impl ThrottleMonitor {
         self.tps_failed
     }
 
-    fn report_all(&mut self, now_s: f64, verdicts: [Verdict; 6], out: &mut OutputSink<'_>) {
+    fn report_all(&mut self, now_s: f64, verdicts: [Verdict; 7], out: &mut OutputSink<'_>) {
         let candidate = self.decided.map(|f| f.name());
         for (i, &verdict) in verdicts.iter().enumerate() {
             let result = TestResult {
@@ -620,14 +627,21 @@ impl Monitor for ThrottleMonitor {
                 self.watt_failed = true;
             }
         }
-        let mut event_verdicts = [Verdict::NotTested; 6];
+        let mut event_verdicts = [Verdict::NotTested; 7];
         match self.decided {
-            Some(f) => event_verdicts[f.event()] = Verdict::Failed,
+            Some(f) => {
+                event_verdicts[f.event()] = Verdict::Failed;
+                event_verdicts[SWITCH_EVENT] = if self.tps_failed {
+                    Verdict::Failed
+                } else {
+                    Verdict::Passed
+                };
+            }
             None if self.first_fail_s.is_none()
                 && self.rail_low_run == 0
                 && self.rail_high_run == 0 =>
             {
-                event_verdicts = [Verdict::Passed; 6];
+                event_verdicts = [Verdict::Passed; 7];
             }
             None => {}
         }

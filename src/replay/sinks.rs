@@ -1,0 +1,344 @@
+//! Where monitor outputs go during a replay: the events file (`--events`, JSON lines), the
+//! output MCAP (`--out`, the fdd topics), and the collectors behind the summary (DTCs raised,
+//! detection delays, estimate error against ground truth).
+//!
+//! Without `--out` and `--events` nothing is serialized: a step's outputs only touch the
+//! collectors, and those only for events (status changes) and, when the log has ground truth,
+//! the configured estimate.
+
+use std::cell::Cell;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::PathBuf;
+use std::rc::Rc;
+
+use fdd_diagnostics::dtc::{Dtc, DtcStatus, StatusBit};
+use fdd_diagnostics::event::DiagnosticEvent;
+use fdd_diagnostics::Verdict;
+use fdd_monitor::log::{nan_as_null, vec_nan_as_null, LogWriter};
+use fdd_monitor::monitor::Output;
+use serde::Serialize;
+
+use super::ReplayError;
+use crate::stats::RunningStats;
+
+/// `/fdd/throttle/position`, borrowed (no allocation per message).
+#[derive(Serialize)]
+struct PositionOut<'a> {
+    #[serde(serialize_with = "nan_as_null::serialize")]
+    angle_deg: f64,
+    #[serde(serialize_with = "nan_as_null::serialize")]
+    lower_deg: f64,
+    #[serde(serialize_with = "nan_as_null::serialize")]
+    upper_deg: f64,
+    source: &'a str,
+}
+
+/// `/fdd/throttle/innovation`, borrowed.
+#[derive(Serialize)]
+struct InnovationOut<'a> {
+    filter: &'a str,
+    #[serde(serialize_with = "vec_nan_as_null::serialize")]
+    residual: &'a [f64],
+    #[serde(serialize_with = "vec_nan_as_null::serialize")]
+    variance: &'a [f64],
+    #[serde(serialize_with = "nan_as_null::serialize")]
+    nis: f64,
+    dof: usize,
+}
+
+/// `/fdd/tests`, borrowed.
+#[derive(Serialize)]
+struct TestOut<'a> {
+    test: &'a str,
+    #[serde(serialize_with = "nan_as_null::serialize")]
+    value: f64,
+    #[serde(serialize_with = "nan_as_null::serialize")]
+    min: f64,
+    #[serde(serialize_with = "nan_as_null::serialize")]
+    max: f64,
+    verdict: Verdict,
+}
+
+/// `/fdd/dtc_status`.
+#[derive(Serialize)]
+struct DtcStatusOut {
+    dtc: Dtc,
+    status: u8,
+}
+
+/// Output topics of `--out`.
+pub const POSITION_TOPIC: &str = "/fdd/throttle/position";
+pub const INNOVATION_TOPIC: &str = "/fdd/throttle/innovation";
+pub const TESTS_TOPIC: &str = "/fdd/tests";
+pub const DTC_STATUS_TOPIC: &str = "/fdd/dtc_status";
+pub const EVENTS_TOPIC: &str = "/fdd/events";
+
+/// One event (DTC) of a monitor, as seen through its status changes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DtcRecord {
+    /// The configured event name (`wattmeter_no_signal`).
+    pub event: String,
+    pub dtc: Dtc,
+    /// Time testFailed first went 0 -> 1, s.
+    pub first_failed_s: Option<f64>,
+    /// How many times testFailed went 0 -> 1.
+    pub raised: u32,
+    /// Status changes seen.
+    pub changes: u64,
+    /// The latest status byte.
+    pub status: DtcStatus,
+}
+
+/// A fault of the ground truth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FaultOnset {
+    /// The truth's fault name (`tps_open`).
+    pub fault: String,
+    /// First log time at which it was active, ns.
+    pub onset_ns: u64,
+    /// The first DTC raised (testFailed 0 -> 1) at or after the onset: (DTC, event, time s).
+    pub detected: Option<(Dtc, String, f64)>,
+}
+
+/// The collectors and writers. Written to from inside monitor steps, so errors are kept in
+/// `error` and checked by the replay loop after each call.
+pub struct Sinks {
+    /// Time of the step being run (set by the monitor wrapper), ns.
+    pub clock: Rc<Cell<u64>>,
+    events_file: Option<(PathBuf, BufWriter<File>)>,
+    out: Option<LogWriter<BufWriter<File>>>,
+    /// The first write error; nothing more is written after it.
+    pub error: Option<ReplayError>,
+    /// Status changes (DiagnosticEvents) seen.
+    pub events: u64,
+    /// Events written to the events file.
+    pub events_written: u64,
+    /// One record per event that changed status, in order of first change.
+    pub dtcs: Vec<DtcRecord>,
+    /// The estimate compared with the truth (`truth.estimate`).
+    pub estimate_name: String,
+    /// Latest true angle (NaN before the first truth message), deg.
+    pub truth_angle: f64,
+    /// Faults seen active in the truth, in order of onset.
+    pub onsets: Vec<FaultOnset>,
+    /// Estimate error over all estimates with a truth, and after the first switch away from
+    /// `tps`.
+    pub error_all: RunningStats,
+    pub error_after_switch: RunningStats,
+    /// Time of the first estimate whose source is not `tps`, ns.
+    pub switched_at_ns: Option<u64>,
+    /// Estimates of `estimate_name` seen.
+    pub estimates: u64,
+    /// Outputs of kinds `--out` has no topic for (estimates of other names).
+    pub unwritten: u64,
+}
+
+impl Sinks {
+    pub fn new(
+        clock: Rc<Cell<u64>>,
+        events_file: Option<(PathBuf, BufWriter<File>)>,
+        out: Option<LogWriter<BufWriter<File>>>,
+        estimate_name: String,
+    ) -> Self {
+        Sinks {
+            clock,
+            events_file,
+            out,
+            error: None,
+            events: 0,
+            events_written: 0,
+            dtcs: Vec::new(),
+            estimate_name,
+            truth_angle: f64::NAN,
+            onsets: Vec::new(),
+            error_all: RunningStats::default(),
+            error_after_switch: RunningStats::default(),
+            switched_at_ns: None,
+            estimates: 0,
+            unwritten: 0,
+        }
+    }
+
+    /// Takes one monitor output.
+    pub fn on_output(&mut self, o: Output<'_>) {
+        let t_ns = self.clock.get();
+        match o {
+            Output::Event(ev) => self.on_event(t_ns, ev),
+            Output::Estimate {
+                name,
+                value,
+                lower,
+                upper,
+                source,
+            } => {
+                if name == self.estimate_name {
+                    self.estimates += 1;
+                    if self.switched_at_ns.is_none() && source != "tps" {
+                        self.switched_at_ns = Some(t_ns);
+                    }
+                    let err = value - self.truth_angle;
+                    if err.is_finite() {
+                        self.error_all.push(err);
+                        if self.switched_at_ns.is_some() {
+                            self.error_after_switch.push(err);
+                        }
+                    }
+                    self.write_out(POSITION_TOPIC, t_ns, || PositionOut {
+                        angle_deg: value,
+                        lower_deg: lower,
+                        upper_deg: upper,
+                        source,
+                    });
+                } else if self.out.is_some() {
+                    self.unwritten += 1;
+                }
+            }
+            Output::Innovation {
+                filter,
+                residual,
+                variance,
+                nis,
+                dof,
+            } => self.write_out(INNOVATION_TOPIC, t_ns, || InnovationOut {
+                filter,
+                residual,
+                variance,
+                nis,
+                dof,
+            }),
+            Output::Test { test, result } => self.write_out(TESTS_TOPIC, t_ns, || TestOut {
+                test,
+                value: result.value,
+                min: result.min,
+                max: result.max,
+                verdict: result.verdict,
+            }),
+            Output::DtcStatus { dtc, status } => {
+                self.write_out(DTC_STATUS_TOPIC, t_ns, || DtcStatusOut {
+                    dtc,
+                    status: status.byte(),
+                })
+            }
+        }
+    }
+
+    fn write_out<T: Serialize>(&mut self, topic: &str, t_ns: u64, msg: impl FnOnce() -> T) {
+        if self.error.is_some() {
+            return;
+        }
+        if let Some(w) = self.out.as_mut() {
+            if let Err(e) = w.write(topic, t_ns, &msg()) {
+                self.error = Some(ReplayError::Log(e));
+            }
+        }
+    }
+
+    fn on_event(&mut self, t_ns: u64, ev: &DiagnosticEvent) {
+        self.events += 1;
+        let raised = ev.bit_changed(StatusBit::TestFailed) && ev.status_after.test_failed();
+        let k = match self.dtcs.iter().position(|d| d.event == ev.event) {
+            Some(k) => k,
+            None => {
+                self.dtcs.push(DtcRecord {
+                    event: ev.event.clone(),
+                    dtc: ev.dtc,
+                    first_failed_s: None,
+                    raised: 0,
+                    changes: 0,
+                    status: ev.status_after,
+                });
+                self.dtcs.len() - 1
+            }
+        };
+        let d = &mut self.dtcs[k];
+        d.changes += 1;
+        d.status = ev.status_after;
+        if raised {
+            d.raised += 1;
+            d.first_failed_s.get_or_insert(ev.time_s);
+            tracing::info!(
+                dtc = %ev.dtc,
+                event = %ev.event,
+                "DTC {} raised (testFailed) at {:.6} s: {}",
+                ev.dtc,
+                ev.time_s,
+                ev.event
+            );
+            let onset_limit = ev.time_s;
+            for f in &mut self.onsets {
+                if f.detected.is_none() && f.onset_ns as f64 * 1e-9 <= onset_limit {
+                    f.detected = Some((ev.dtc, ev.event.clone(), ev.time_s));
+                }
+            }
+        } else {
+            tracing::debug!(
+                dtc = %ev.dtc,
+                event = %ev.event,
+                "status {:#04x} -> {:#04x} at {:.6} s",
+                ev.status_before.byte(),
+                ev.status_after.byte(),
+                ev.time_s
+            );
+        }
+        if self.error.is_some() {
+            return;
+        }
+        if let Some((path, w)) = self.events_file.as_mut() {
+            let res = serde_json::to_writer(&mut *w, ev)
+                .map_err(std::io::Error::from)
+                .and_then(|()| w.write_all(b"\n"));
+            match res {
+                Ok(()) => self.events_written += 1,
+                Err(source) => {
+                    self.error = Some(ReplayError::Events {
+                        file: path.clone(),
+                        source,
+                    })
+                }
+            }
+        }
+        self.write_out(EVENTS_TOPIC, t_ns, || ev);
+    }
+
+    /// A truth fault became active at `t_ns` (first time for this name).
+    pub fn fault_onset(&mut self, fault: &str, t_ns: u64) {
+        if self.onsets.iter().any(|f| f.fault == fault) {
+            return;
+        }
+        tracing::info!(
+            fault,
+            "ground truth: fault '{fault}' active from {:.6} s",
+            t_ns as f64 * 1e-9
+        );
+        self.onsets.push(FaultOnset {
+            fault: fault.to_string(),
+            onset_ns: t_ns,
+            detected: None,
+        });
+    }
+
+    /// Flushes the events file and finishes the output MCAP. Returns (events file, events
+    /// written) and (out file, messages written).
+    #[allow(clippy::type_complexity)]
+    pub fn finish(
+        &mut self,
+    ) -> Result<(Option<(PathBuf, u64)>, Option<(PathBuf, u64)>), ReplayError> {
+        let mut events = None;
+        if let Some((path, mut w)) = self.events_file.take() {
+            w.flush().map_err(|source| ReplayError::Events {
+                file: path.clone(),
+                source,
+            })?;
+            events = Some((path, self.events_written));
+        }
+        let mut out = None;
+        if let Some(w) = self.out.take() {
+            let path = w.file().to_path_buf();
+            let n = w.messages_written();
+            w.finish()?;
+            out = Some((path, n));
+        }
+        Ok((events, out))
+    }
+}

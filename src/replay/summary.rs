@@ -1,0 +1,451 @@
+//! What a replay did, and its rendering as the table `fdd replay` prints at the end.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use fdd_monitor::log::ReadMode;
+
+use super::problems::{Problem, ProblemKind};
+use super::sinks::{DtcRecord, FaultOnset};
+
+/// Messages of one topic.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicSummary {
+    pub topic: String,
+    pub messages: u64,
+    /// `signal tps (voltage_v)`, `ground truth`, or `ignored`.
+    pub used_as: String,
+}
+
+/// One configured signal.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SignalSummary {
+    pub name: String,
+    pub topic: String,
+    pub field: String,
+    /// Samples accepted by the signal table.
+    pub samples: u64,
+    /// Messages on the topic whose sample was refused (bad JSON, missing field, NaN, time).
+    pub rejected: u64,
+    /// Time of the latest accepted sample, ns.
+    pub last_sample_ns: Option<u64>,
+    /// No sample ever arrived (the topic is not in the log, or every message was bad).
+    pub missing: bool,
+    /// The latest sample was older than max_age at the end of the log.
+    pub stale_at_end: bool,
+}
+
+/// A monitor that ran, or a note on one that did not.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MonitorSummary {
+    pub name: String,
+    /// Steps run.
+    pub steps: u64,
+}
+
+/// Mean and standard deviation of an error, deg.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ErrorStats {
+    pub samples: u64,
+    pub mean: f64,
+    pub std: f64,
+}
+
+/// Ground-truth comparisons (logs with a truth topic).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TruthSummary {
+    /// Truth messages read.
+    pub messages: u64,
+    /// Faults active in the log, with onset and first DTC after it.
+    pub faults: Vec<FaultOnset>,
+    /// The estimate compared (`truth.estimate`).
+    pub estimate: String,
+    /// Estimates seen.
+    pub estimates: u64,
+    /// First estimate whose source was not `tps`, ns.
+    pub switched_at_ns: Option<u64>,
+    pub error_all: Option<ErrorStats>,
+    pub error_after_switch: Option<ErrorStats>,
+}
+
+/// Everything the replay reports at the end.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReplaySummary {
+    pub log: PathBuf,
+    /// The configuration's origin (a path or the embedded default).
+    pub config: String,
+    pub read_mode: ReadMode,
+    /// Messages read (including refused ones).
+    pub messages: u64,
+    /// Distinct consecutive log times (one frame = the samples of one time step).
+    pub frames: u64,
+    /// Wall time of the replay, s.
+    pub wall_s: f64,
+    /// First and last log time processed, ns.
+    pub time_range_ns: Option<(u64, u64)>,
+    pub operation_cycles: u32,
+    pub topics: Vec<TopicSummary>,
+    pub signals: Vec<SignalSummary>,
+    pub monitors: Vec<MonitorSummary>,
+    /// Monitors enabled in the configuration that this build does not have.
+    pub monitors_unavailable: Vec<String>,
+    pub problems: Vec<Problem>,
+    /// Status changes (DiagnosticEvents) emitted.
+    pub events: u64,
+    /// Every event that changed status.
+    pub dtcs: Vec<DtcRecord>,
+    pub truth: Option<TruthSummary>,
+    /// `--events` file and events written.
+    pub events_file: Option<(PathBuf, u64)>,
+    /// `--out` file and messages written.
+    pub out_file: Option<(PathBuf, u64)>,
+    /// The fatal error that stopped the reading before the end of the log (everything before
+    /// it was processed and is reported).
+    pub stopped_early: Option<String>,
+}
+
+impl ReplaySummary {
+    /// Occurrences of problems of `kind` (all topics).
+    pub fn problem_count(&self, kind: ProblemKind) -> u64 {
+        self.problems
+            .iter()
+            .filter(|p| p.kind == kind)
+            .map(|p| p.count)
+            .sum()
+    }
+
+    /// The problem counter of `kind` on `topic`.
+    pub fn problem(&self, kind: ProblemKind, topic: &str) -> Option<&Problem> {
+        self.problems
+            .iter()
+            .find(|p| p.kind == kind && p.topic.as_deref() == Some(topic))
+    }
+
+    /// Signals that never had a sample.
+    pub fn missing_signals(&self) -> impl Iterator<Item = &SignalSummary> {
+        self.signals.iter().filter(|s| s.missing)
+    }
+
+    /// Events whose testFailed bit was set at least once.
+    pub fn dtcs_raised(&self) -> impl Iterator<Item = &DtcRecord> {
+        self.dtcs.iter().filter(|d| d.raised > 0)
+    }
+
+    /// Frames per second of wall time.
+    pub fn frames_per_s(&self) -> f64 {
+        if self.wall_s > 0.0 {
+            self.frames as f64 / self.wall_s
+        } else {
+            f64::NAN
+        }
+    }
+
+    /// The summary table printed by `fdd replay`.
+    pub fn render(&self) -> String {
+        let mut s = String::new();
+        let _ = self.render_into(&mut s);
+        s
+    }
+
+    fn render_into(&self, s: &mut String) -> std::fmt::Result {
+        writeln!(s, "fdd replay: {}", self.log.display())?;
+        let mut head = Table::new(&["", ""]);
+        head.row(vec!["config".into(), self.config.clone()]);
+        head.row(vec![
+            "read".into(),
+            match self.read_mode {
+                ReadMode::Indexed => "indexed (log-time order)".into(),
+                ReadMode::Linear => {
+                    "linear (no usable index: file order, times checked per signal)".into()
+                }
+            },
+        ]);
+        head.row(vec![
+            "log time".into(),
+            match self.time_range_ns {
+                Some((a, b)) => format!(
+                    "{} .. {} s ({} s)",
+                    secs(a),
+                    secs(b),
+                    secs(b.saturating_sub(a))
+                ),
+                None => "no messages".into(),
+            },
+        ]);
+        head.row(vec![
+            "messages".into(),
+            format!(
+                "{} in {} frames, {:.3} s wall time, {:.0} frames/s",
+                self.messages,
+                self.frames,
+                self.wall_s,
+                self.frames_per_s()
+            ),
+        ]);
+        head.row(vec![
+            "operation cycles".into(),
+            self.operation_cycles.to_string(),
+        ]);
+        let mut mons: Vec<String> = self
+            .monitors
+            .iter()
+            .map(|m| format!("{} ({} steps)", m.name, m.steps))
+            .collect();
+        mons.extend(
+            self.monitors_unavailable
+                .iter()
+                .map(|m| format!("{m} (enabled, not in this build)")),
+        );
+        head.row(vec!["monitors".into(), mons.join(", ")]);
+        head.row(vec![
+            "events".into(),
+            format!("{} DTC status changes", self.events),
+        ]);
+        if let Some((p, n)) = &self.events_file {
+            head.row(vec![
+                "events file".into(),
+                format!("{} ({n} events)", p.display()),
+            ]);
+        }
+        if let Some((p, n)) = &self.out_file {
+            head.row(vec![
+                "output log".into(),
+                format!("{} ({n} messages)", p.display()),
+            ]);
+        }
+        head.render_plain(s)?;
+        if let Some(e) = &self.stopped_early {
+            writeln!(s, "\nSTOPPED EARLY: {e}")?;
+            writeln!(
+                s,
+                "(everything before this point was processed and is reported below)"
+            )?;
+        }
+
+        writeln!(s, "\nTopics")?;
+        let mut t = Table::new(&["topic", "messages", "used as"]);
+        for tp in &self.topics {
+            t.row(vec![
+                tp.topic.clone(),
+                tp.messages.to_string(),
+                tp.used_as.clone(),
+            ]);
+        }
+        t.render(s)?;
+
+        writeln!(s, "\nSignals")?;
+        let mut t = Table::new(&[
+            "signal",
+            "topic",
+            "field",
+            "samples",
+            "refused",
+            "last sample (s)",
+            "state",
+        ]);
+        for sg in &self.signals {
+            let state = if sg.missing {
+                "MISSING: no sample in the log".to_string()
+            } else if sg.stale_at_end {
+                "stale at the end of the log".to_string()
+            } else {
+                "ok".to_string()
+            };
+            t.row(vec![
+                sg.name.clone(),
+                sg.topic.clone(),
+                sg.field.clone(),
+                sg.samples.to_string(),
+                sg.rejected.to_string(),
+                sg.last_sample_ns.map(secs).unwrap_or_else(|| "-".into()),
+                state,
+            ]);
+        }
+        t.render(s)?;
+
+        writeln!(s, "\nProblems (counted; the replay went on)")?;
+        if self.problems.is_empty() {
+            writeln!(s, "  none")?;
+        } else {
+            let mut t = Table::new(&["problem", "topic", "count", "first at (s)"]);
+            for p in &self.problems {
+                t.row(vec![
+                    p.kind.label().into(),
+                    p.topic.clone().unwrap_or_else(|| "-".into()),
+                    p.count.to_string(),
+                    p.first_time_ns.map(secs).unwrap_or_else(|| "-".into()),
+                ]);
+            }
+            t.render(s)?;
+            writeln!(s, "  first occurrences:")?;
+            for p in &self.problems {
+                writeln!(s, "    {}", p.first_message)?;
+            }
+        }
+
+        writeln!(s, "\nDTCs raised (testFailed 0 -> 1)")?;
+        let raised: Vec<_> = self.dtcs_raised().collect();
+        if raised.is_empty() {
+            writeln!(s, "  none")?;
+        } else {
+            let mut t = Table::new(&["DTC", "event", "first at (s)", "times", "status at end"]);
+            for d in raised {
+                t.row(vec![
+                    d.dtc.to_string(),
+                    d.event.clone(),
+                    d.first_failed_s
+                        .map(|x| format!("{x:.3}"))
+                        .unwrap_or_default(),
+                    d.raised.to_string(),
+                    format!("{:#04x}", d.status.byte()),
+                ]);
+            }
+            t.render(s)?;
+        }
+
+        if let Some(tr) = &self.truth {
+            writeln!(s, "\nGround truth ({} messages)", tr.messages)?;
+            if tr.faults.is_empty() {
+                writeln!(
+                    s,
+                    "  no fault active in the log: every DTC raised is a false alarm"
+                )?;
+            } else {
+                let mut t = Table::new(&[
+                    "fault",
+                    "onset (s)",
+                    "first DTC after onset",
+                    "at (s)",
+                    "detection delay (ms)",
+                ]);
+                for f in &tr.faults {
+                    let (dtc, at, delay) = match &f.detected {
+                        Some((dtc, ev, at)) => (
+                            format!("{dtc} {ev}"),
+                            format!("{at:.3}"),
+                            format!("{:.1}", (at - f.onset_ns as f64 * 1e-9) * 1e3),
+                        ),
+                        None => ("none".into(), "-".into(), "not detected".into()),
+                    };
+                    t.row(vec![f.fault.clone(), secs(f.onset_ns), dtc, at, delay]);
+                }
+                t.render(s)?;
+            }
+            write!(s, "  estimate error ({} vs true angle, deg): ", tr.estimate)?;
+            match tr.error_all {
+                None => writeln!(s, "no estimates ({} seen)", tr.estimates)?,
+                Some(e) => {
+                    write!(
+                        s,
+                        "all {} samples mean {:.3} std {:.3}",
+                        e.samples, e.mean, e.std
+                    )?;
+                    match (tr.switched_at_ns, tr.error_after_switch) {
+                        (Some(at), Some(a)) => writeln!(
+                            s,
+                            "; after the switch away from tps at {} s: {} samples mean {:.3} std {:.3}",
+                            secs(at),
+                            a.samples,
+                            a.mean,
+                            a.std
+                        )?,
+                        _ => writeln!(s, "; source never switched away from tps")?,
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Nanoseconds as seconds, millisecond resolution.
+fn secs(ns: u64) -> String {
+    format!("{:.3}", ns as f64 * 1e-9)
+}
+
+/// A left-aligned text table (numbers right-aligned).
+struct Table {
+    header: Vec<String>,
+    rows: Vec<Vec<String>>,
+}
+
+impl Table {
+    fn new(header: &[&str]) -> Self {
+        Table {
+            header: header.iter().map(|h| h.to_string()).collect(),
+            rows: Vec::new(),
+        }
+    }
+
+    fn row(&mut self, cells: Vec<String>) {
+        self.rows.push(cells);
+    }
+
+    fn widths(&self) -> Vec<usize> {
+        let mut w: Vec<usize> = self.header.iter().map(|h| h.chars().count()).collect();
+        for r in &self.rows {
+            for (i, c) in r.iter().enumerate() {
+                if i < w.len() {
+                    w[i] = w[i].max(c.chars().count());
+                }
+            }
+        }
+        w
+    }
+
+    /// Columns whose cells are all numbers (or `-`) are right-aligned.
+    fn numeric(&self) -> Vec<bool> {
+        (0..self.header.len())
+            .map(|i| {
+                !self.rows.is_empty()
+                    && self.rows.iter().all(|r| {
+                        r.get(i).is_some_and(|c| {
+                            !c.is_empty()
+                                && c.chars()
+                                    .all(|ch| ch.is_ascii_digit() || ch == '.' || ch == '-')
+                        })
+                    })
+            })
+            .collect()
+    }
+
+    fn line(
+        s: &mut String,
+        cells: &[String],
+        widths: &[usize],
+        numeric: &[bool],
+    ) -> std::fmt::Result {
+        s.push(' ');
+        for (i, c) in cells.iter().enumerate() {
+            let w = widths[i];
+            let last = i + 1 == cells.len();
+            if numeric[i] {
+                write!(s, " {c:>w$}")?;
+            } else if last {
+                write!(s, " {c}")?;
+            } else {
+                write!(s, " {c:<w$}")?;
+            }
+        }
+        s.push('\n');
+        Ok(())
+    }
+
+    fn render(&self, s: &mut String) -> std::fmt::Result {
+        let (w, n) = (self.widths(), self.numeric());
+        Self::line(s, &self.header, &w, &n)?;
+        for r in &self.rows {
+            Self::line(s, r, &w, &n)?;
+        }
+        Ok(())
+    }
+
+    /// Without the header row.
+    fn render_plain(&self, s: &mut String) -> std::fmt::Result {
+        let (w, n) = (self.widths(), self.numeric());
+        for r in &self.rows {
+            Self::line(s, r, &w, &n)?;
+        }
+        Ok(())
+    }
+}
