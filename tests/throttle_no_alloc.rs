@@ -1,0 +1,100 @@
+//! A step of the throttle monitor (three filters' worth of UKF work, its tests, the event
+//! memory) must not touch the heap in its steady state. A counting global allocator, armed per
+//! thread only around the scheduler's steps, proves it over ten seconds of 1 kHz data.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use fdd::config::ThrottleConfig;
+use fdd_estimators::models::throttle::ThrottleModel;
+use fdd_fixtures::scenario::Scenario;
+use fdd_fixtures::throttle_sim::{ThrottlePlant, ThrottleSim};
+use fdd_monitor::monitor::Output;
+use fdd_monitor::scheduler::Scheduler;
+use fdd_monitor::signal_table::{SignalSpec, SignalTable};
+use fdd_monitor::throttle::ThrottleMonitor;
+
+struct Counting;
+
+thread_local! {
+    static ARMED: Cell<bool> = const { Cell::new(false) };
+    static COUNT: Cell<usize> = const { Cell::new(0) };
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if ARMED.with(Cell::get) {
+            COUNT.with(|c| c.set(c.get() + 1));
+        }
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if ARMED.with(Cell::get) {
+            COUNT.with(|c| c.set(c.get() + 1));
+        }
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn throttle_monitor_steps_allocate_nothing() {
+    let cfg = ThrottleConfig::load(None).expect("embedded config");
+    let model = ThrottleModel::new(cfg.model).expect("model");
+    let mut table = SignalTable::new(
+        ["motor_voltage", "tps", "wattmeter"]
+            .iter()
+            .map(|n| SignalSpec {
+                name: n.to_string(),
+                max_age_ns: 5_000_000,
+            })
+            .collect(),
+    )
+    .expect("table");
+    let ids = ["motor_voltage", "tps", "wattmeter"].map(|n| table.id(n).expect("declared"));
+    let monitor = ThrottleMonitor::new(
+        model,
+        cfg.position_sensor.full_scale_v,
+        cfg.position_sensor.full_scale_deg,
+        &cfg.monitor,
+        &table,
+    )
+    .expect("monitor");
+    let mut sched = Scheduler::new(0);
+    sched.add(Box::new(monitor)).expect("schedules");
+    let mut outputs = 0u64;
+    let mut sink = |_: Output<'_>| outputs += 1;
+    sched.start_operation_cycle(0, &mut sink);
+    let plant = ThrottlePlant::from_default_config().expect("plant");
+    let sc = Scenario::nominal_throttle("alloc", 10.0, 3);
+    let mut counted_steps = 0;
+    for (k, f) in ThrottleSim::new(&sc, &plant).expect("sim").enumerate() {
+        // The first second is warm-up: the tests complete for the first time (0x50 -> 0x00),
+        // and those status changes are events, which may allocate.
+        let armed = k >= 1000;
+        ARMED.with(|a| a.set(armed));
+        counted_steps += u64::from(armed) * sched.run_until(f.t_ns, &table, &mut sink);
+        ARMED.with(|a| a.set(false));
+        table.set(ids[0], f.t_ns, f.motor_voltage_v).expect("u");
+        table.set(ids[1], f.t_ns, f.tps_v).expect("tps");
+        table.set(ids[2], f.t_ns, f.wattmeter_w).expect("wattmeter");
+    }
+    let n = COUNT.with(Cell::get);
+    assert!(counted_steps >= 8_999, "{counted_steps} steps counted");
+    assert!(outputs > counted_steps, "the monitor reported its outputs");
+    assert_eq!(
+        n, 0,
+        "{n} heap allocations in {counted_steps} monitor steps"
+    );
+    // The counter does count.
+    ARMED.with(|a| a.set(true));
+    let v = vec![1u8; 8];
+    ARMED.with(|a| a.set(false));
+    assert_eq!(v.len(), 8);
+    assert_eq!(COUNT.with(Cell::get), 1);
+}
