@@ -213,6 +213,10 @@ pub struct ThrottleMonitor {
     first_fail_s: Option<f64>,
     fired: [bool; 3],
     decided: Option<ThrottleFault>,
+    /// The test result that qualified the fault (reported with its DTC's events).
+    deciding: TestResult,
+    /// The first failing residual test's result, kept through the decision window.
+    first_result: TestResult,
     tps_failed: bool,
     watt_failed: bool,
     memory: EventMemory,
@@ -377,6 +381,8 @@ impl ThrottleMonitor {
             first_fail_s: None,
             fired: [false; 3],
             decided: None,
+            deciding: TestResult::NOT_TESTED,
+            first_result: TestResult::NOT_TESTED,
             tps_failed: false,
             watt_failed: false,
             statuses: [0x50; 7],
@@ -401,11 +407,17 @@ impl ThrottleMonitor {
     fn report_all(&mut self, now_s: f64, verdicts: [Verdict; 7], out: &mut OutputSink<'_>) {
         let candidate = self.decided.map(|f| f.name());
         for (i, &verdict) in verdicts.iter().enumerate() {
-            let result = TestResult {
-                value: if verdict == Verdict::Failed { 1.0 } else { 0.0 },
-                min: 0.0,
-                max: 0.0,
-                verdict,
+            // A failed event carries the test result that qualified the fault; other reports
+            // carry only their verdict (the tests' statistics are on their own outputs).
+            let result = if verdict == Verdict::Failed {
+                self.deciding
+            } else {
+                TestResult {
+                    value: 0.0,
+                    min: 0.0,
+                    max: 0.0,
+                    verdict,
+                }
             };
             let cands: [(&str, f64); 1] = [(candidate.unwrap_or(""), 1.0)];
             let ctx = if candidate.is_some() && verdict == Verdict::Failed {
@@ -588,31 +600,52 @@ impl Monitor for ThrottleMonitor {
         });
 
         // Decision.
-        let verdicts = [nis_result.verdict, cusum_tps.verdict, cusum_watt.verdict];
+        let results = [nis_result, cusum_tps, cusum_watt];
         let mut newly = None;
         if self.decided.is_none() {
             let intermittent =
                 self.dropouts.full() && self.dropouts.span() <= self.cfg.intermittent_window_s;
+            // Rail time against the longest episode that is still a dropout (s).
+            let rail = |run: u32| TestResult {
+                value: f64::from(run) * self.cfg.period_s,
+                min: 0.0,
+                max: f64::from(self.rail_persist - 1) * self.cfg.period_s,
+                verdict: Verdict::Failed,
+            };
             if self.rail_low_run >= self.rail_persist {
-                newly = Some(ThrottleFault::TpsOpen);
+                newly = Some((ThrottleFault::TpsOpen, rail(self.rail_low_run)));
             } else if self.rail_high_run >= self.rail_persist {
-                newly = Some(ThrottleFault::TpsShort);
+                newly = Some((ThrottleFault::TpsShort, rail(self.rail_high_run)));
             } else if intermittent {
-                newly = Some(ThrottleFault::TpsIntermittent);
+                let count = self.cfg.intermittent_count as f64;
+                let dropouts = TestResult {
+                    value: count,
+                    min: 0.0,
+                    max: count - 1.0,
+                    verdict: Verdict::Failed,
+                };
+                newly = Some((ThrottleFault::TpsIntermittent, dropouts));
             } else {
-                for (i, v) in verdicts.iter().enumerate() {
-                    if *v == Verdict::Failed {
+                for (i, r) in results.iter().enumerate() {
+                    if r.verdict == Verdict::Failed {
                         self.fired[i] = true;
-                        self.first_fail_s.get_or_insert(now_s);
+                        if self.first_fail_s.is_none() {
+                            self.first_fail_s = Some(now_s);
+                            self.first_result = *r;
+                        }
                     }
                 }
                 if let Some(t0) = self.first_fail_s {
                     if now_s - t0 >= self.cfg.decision_window_s {
-                        newly = Some(self.classify());
+                        newly = Some((self.classify(), self.first_result));
                     }
                 }
             }
         }
+        let newly = newly.map(|(f, r)| {
+            self.deciding = r;
+            f
+        });
         if let Some(f) = newly {
             self.decided = Some(f);
             if f.is_tps() {
@@ -677,6 +710,8 @@ impl Monitor for ThrottleMonitor {
         self.tps_ukf = self.tps_ukf_init.clone();
         self.both_ukf = self.both_ukf_init.clone();
         self.decided = None;
+        self.deciding = TestResult::NOT_TESTED;
+        self.first_result = TestResult::NOT_TESTED;
         self.tps_failed = false;
         self.watt_failed = false;
         self.first_fail_s = None;
