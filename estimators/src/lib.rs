@@ -6,12 +6,15 @@
 //!
 //! - [`model`]: the [`TransitionModel`] / [`ObservationModel`] traits a plant implements.
 //! - [`ekf::Ekf`], [`ukf::Ukf`] with the [`sigma_points`] sets AHSM, ARM, AGM and scaled.
+//! - [`fusion`]: the decentralized pair of local EKFs with the naive master fusion, and the
+//!   federated filter (information-sharing factors, fusion-reset) that equals the centralized EKF.
 //! - [`particle::ParticleFilter`]: a bootstrap reference estimator (allocates at construction).
 //! - [`models`]: the electronic throttle and a linear model.
 
 pub mod correction;
 pub mod ekf;
 pub mod error;
+pub mod fusion;
 pub mod innovation;
 pub mod linalg;
 pub mod model;
@@ -23,6 +26,7 @@ pub mod ukf;
 
 pub use ekf::Ekf;
 pub use error::{ConfigError, FilterError};
+pub use fusion::{DecentralizedPair, FederatedFilter, FusedStep, FusionNoise};
 pub use innovation::Innovation;
 pub use model::{numerical_jacobian, ObservationModel, TransitionModel};
 pub use sigma_points::{SigmaKind, SigmaPoints};

@@ -1,0 +1,500 @@
+//! Fusion of two sensors' local Kalman filters into one master estimate (REFERENCE §2).
+//!
+//! Two architectures over the same plant, each with one local filter per sensor:
+//!
+//! - [`DecentralizedPair`]: the paper's decentralized EKF. Two local [`Ekf`]s run on their own
+//!   sensor, completely independently (no feedback from the master), and the master fuses them
+//!   in information form, `P_m^-1 = P_1^-1 + P_2^-1`, `P_m^-1 x_m = P_1^-1 x_1 + P_2^-1 x_2`.
+//!   Both local estimates contain the same prediction (same model, same process noise), so this
+//!   fusion counts the common prior information twice and **its covariance is optimistic**: the
+//!   fused `P_m` is smaller than the error it claims to describe (state NEES above `N`). It is
+//!   kept as the paper defines it so that its inconsistency can be reported as it is.
+//! - [`FederatedFilter`]: Carlson's federated filter in fusion-reset mode with
+//!   information-sharing factors `beta_1 + beta_2 = 1`. Each step the locals are reset from
+//!   the master (`x_i = x_m`, `P_i = P_m / beta_i`, `Q_i = Q / beta_i`), predict and update with
+//!   their own sensor, and the master fuses them in information form. The common prediction is
+//!   split between the locals instead of being counted twice; with a linear model this is
+//!   exactly the centralized Kalman filter that processes both sensors at once (and with
+//!   nonlinear models exactly the centralized EKF, since both locals linearize at the same
+//!   predicted state).
+//!
+//! Both are fixed-size and allocate nothing per step; every error is a [`FilterError`] value
+//! after which the filter is as it was before the call. Inversions use the Cholesky routines
+//! of [`crate::linalg`].
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::correction::{check_covariance, check_input, check_measurement, correct};
+use crate::ekf::Ekf;
+use crate::error::{ConfigError, FilterError};
+use crate::innovation::Innovation;
+use crate::linalg::{all_finite, cholesky, cholesky_solve, symmetrize};
+use crate::model::{ObservationModel, TransitionModel};
+
+/// Noise covariances of a two-sensor fusion: process noise `q` (positive semidefinite) and the
+/// measurement noise `r1`, `r2` of sensor 1 and 2 (positive definite). The two sensors' noises
+/// are assumed independent of each other.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FusionNoise<const N: usize, const M1: usize, const M2: usize> {
+    /// Process noise covariance of the (shared) transition model.
+    pub q: SMatrix<f64, N, N>,
+    /// Measurement noise covariance of sensor 1.
+    pub r1: SMatrix<f64, M1, M1>,
+    /// Measurement noise covariance of sensor 2.
+    pub r2: SMatrix<f64, M2, M2>,
+}
+
+/// What one fusion step produced: the master estimate and each local filter's innovation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FusedStep<const N: usize, const M1: usize, const M2: usize> {
+    /// Fused (master) state estimate.
+    pub x: SVector<f64, N>,
+    /// Fused (master) covariance.
+    pub p: SMatrix<f64, N, N>,
+    /// Innovation of the local filter of sensor 1 (against that filter's own prediction).
+    pub local1: Innovation<M1>,
+    /// Innovation of the local filter of sensor 2.
+    pub local2: Innovation<M2>,
+    /// Normalized innovation squared of both sensors together; see the filters' `step` for
+    /// what it is in each architecture. Its mean is `dof` for a consistent filter.
+    pub nis: f64,
+    /// Degrees of freedom of `nis`, `M1 + M2`.
+    pub dof: usize,
+}
+
+/// Information-form fusion `P^-1 = sum P_k^-1`, `P^-1 x = sum P_k^-1 x_k` of `K` estimates
+/// given by their means and the Cholesky factors of their covariances.
+fn fuse_information<const N: usize, const K: usize>(
+    means: &[SVector<f64, N>; K],
+    chols: &[SMatrix<f64, N, N>; K],
+) -> Result<(SVector<f64, N>, SMatrix<f64, N, N>), FilterError> {
+    let eye = SMatrix::<f64, N, N>::identity();
+    let mut info = SMatrix::<f64, N, N>::zeros();
+    let mut info_x = SVector::<f64, N>::zeros();
+    for k in 0..K {
+        info += cholesky_solve(&chols[k], &eye);
+        info_x += cholesky_solve(&chols[k], &means[k]);
+    }
+    symmetrize(&mut info);
+    let l = cholesky(&info).map_err(|pivot| FilterError::NotPositiveDefinite {
+        which: "fused information matrix",
+        pivot,
+    })?;
+    let mut p = cholesky_solve(&l, &eye);
+    symmetrize(&mut p);
+    let x = cholesky_solve(&l, &info_x);
+    if !all_finite(&x) {
+        return Err(FilterError::NonFiniteResult {
+            which: "fused state",
+        });
+    }
+    if !all_finite(&p) {
+        return Err(FilterError::NonFiniteResult {
+            which: "fused covariance",
+        });
+    }
+    Ok((x, p))
+}
+
+fn chol_of<const N: usize>(
+    which: &'static str,
+    p: &SMatrix<f64, N, N>,
+) -> Result<SMatrix<f64, N, N>, FilterError> {
+    cholesky(p).map_err(|pivot| FilterError::NotPositiveDefinite { which, pivot })
+}
+
+fn check_finite_state<const N: usize>(x: &SVector<f64, N>) -> Result<(), ConfigError> {
+    if all_finite(x) {
+        Ok(())
+    } else {
+        Err(ConfigError::InvalidParameter {
+            name: "x0",
+            value: f64::NAN,
+            reason: "must be finite",
+        })
+    }
+}
+
+/// The paper's decentralized EKF: one independent local [`Ekf`] per sensor on the same
+/// transition model, and a master that fuses them as `P_m^-1 = P_1^-1 + P_2^-1`,
+/// `P_m^-1 x_m = P_1^-1 x_1 + P_2^-1 x_2`.
+///
+/// The locals are never reset from the master, as in the paper. Because both carry the same
+/// prediction (prior and process noise), the master counts that information twice: the fused
+/// covariance is **optimistic** (smaller than the true error covariance, and smaller than the
+/// centralized filter's). Use [`FederatedFilter`] for a consistent fusion.
+#[derive(Debug, Clone)]
+pub struct DecentralizedPair<
+    T,
+    O1,
+    O2,
+    const N: usize,
+    const M1: usize,
+    const M2: usize,
+    const U: usize,
+> {
+    local1: Ekf<T, O1, N, M1, U>,
+    local2: Ekf<T, O2, N, M2, U>,
+    x: SVector<f64, N>,
+    p: SMatrix<f64, N, N>,
+}
+
+impl<T, O1, O2, const N: usize, const M1: usize, const M2: usize, const U: usize>
+    DecentralizedPair<T, O1, O2, N, M1, M2, U>
+where
+    T: TransitionModel<N, U>,
+    O1: ObservationModel<N, M1, U>,
+    O2: ObservationModel<N, M2, U>,
+{
+    /// Builds both local filters from the same initial estimate `x0`, `p0` and process noise.
+    /// The initial master estimate is the fusion of the two locals (so already `p0 / 2`).
+    pub fn new(
+        transition: T,
+        observation1: O1,
+        observation2: O2,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+        noise: FusionNoise<N, M1, M2>,
+    ) -> Result<Self, ConfigError>
+    where
+        T: Clone,
+    {
+        let local1 = Ekf::new(transition.clone(), observation1, x0, p0, noise.q, noise.r1)?;
+        let local2 = Ekf::new(transition, observation2, x0, p0, noise.q, noise.r2)?;
+        Self::from_locals(local1, local2)
+    }
+
+    /// Wraps two already built local filters (which may differ in their process noise).
+    pub fn from_locals(
+        local1: Ekf<T, O1, N, M1, U>,
+        local2: Ekf<T, O2, N, M2, U>,
+    ) -> Result<Self, ConfigError> {
+        let mut pair = Self {
+            local1,
+            local2,
+            x: SVector::zeros(),
+            p: SMatrix::identity(),
+        };
+        let (x, p) = pair.fuse().map_err(|_| ConfigError::NotPositive {
+            name: "P0",
+            kind: "definite",
+        })?;
+        pair.x = x;
+        pair.p = p;
+        Ok(pair)
+    }
+
+    /// The master fusion of the current local estimates (information form, naive: the common
+    /// prediction is counted twice, so the covariance is optimistic).
+    pub fn fuse(&self) -> Result<(SVector<f64, N>, SMatrix<f64, N, N>), FilterError> {
+        let l1 = chol_of("local covariance 1", self.local1.covariance())?;
+        let l2 = chol_of("local covariance 2", self.local2.covariance())?;
+        fuse_information(&[*self.local1.state(), *self.local2.state()], &[l1, l2])
+    }
+
+    /// One step: both locals predict with `u` and update with their own measurement, then the
+    /// master fuses them. `nis` in the result is `local1.nis + local2.nis`: each local filter
+    /// is a proper Kalman filter, so its mean is `M1 + M2` even though the *fused* covariance
+    /// is optimistic (the two local innovations are correlated through the shared process
+    /// noise, so the sum is not chi-square; the fused estimate's inconsistency shows in its
+    /// state error, not here).
+    ///
+    /// Inputs and measurements are checked before anything changes; on any error both locals
+    /// and the master are left as they were.
+    pub fn step(
+        &mut self,
+        u: &SVector<f64, U>,
+        y1: &SVector<f64, M1>,
+        y2: &SVector<f64, M2>,
+    ) -> Result<FusedStep<N, M1, M2>, FilterError> {
+        check_input(u)?;
+        check_measurement(y1, &[true; M1])?;
+        check_measurement(y2, &[true; M2])?;
+        let saved = (
+            *self.local1.state(),
+            *self.local1.covariance(),
+            *self.local2.state(),
+            *self.local2.covariance(),
+        );
+        match self.try_step(u, y1, y2) {
+            Ok(step) => {
+                self.x = step.x;
+                self.p = step.p;
+                Ok(step)
+            }
+            Err(e) => {
+                // The saved estimates were accepted by the filters before, so the resets succeed.
+                let r1 = self.local1.reset(saved.0, saved.1);
+                let r2 = self.local2.reset(saved.2, saved.3);
+                debug_assert!(r1.is_ok() && r2.is_ok());
+                Err(e)
+            }
+        }
+    }
+
+    fn try_step(
+        &mut self,
+        u: &SVector<f64, U>,
+        y1: &SVector<f64, M1>,
+        y2: &SVector<f64, M2>,
+    ) -> Result<FusedStep<N, M1, M2>, FilterError> {
+        self.local1.predict(u)?;
+        self.local2.predict(u)?;
+        let local1 = self.local1.update(y1, u)?;
+        let local2 = self.local2.update(y2, u)?;
+        let (x, p) = self.fuse()?;
+        Ok(FusedStep {
+            x,
+            p,
+            local1,
+            local2,
+            nis: local1.nis + local2.nis,
+            dof: local1.dof + local2.dof,
+        })
+    }
+
+    /// Fused state estimate (after the last successful step).
+    pub fn state(&self) -> &SVector<f64, N> {
+        &self.x
+    }
+
+    /// Fused covariance (optimistic, see the type's documentation).
+    pub fn covariance(&self) -> &SMatrix<f64, N, N> {
+        &self.p
+    }
+
+    /// The local filter of sensor 1.
+    pub fn local1(&self) -> &Ekf<T, O1, N, M1, U> {
+        &self.local1
+    }
+
+    /// The local filter of sensor 2.
+    pub fn local2(&self) -> &Ekf<T, O2, N, M2, U> {
+        &self.local2
+    }
+}
+
+/// Carlson's federated Kalman filter, fusion-reset mode, with two local EKFs (one per sensor)
+/// and information-sharing factors `beta = [beta_1, beta_2]`, `beta_i > 0`, `sum = 1` (no
+/// master share).
+///
+/// Each step:
+/// 1. the locals are reset from the master: `x_i = x_m`, `P_i = P_m / beta_i`, `Q_i = Q / beta_i`;
+/// 2. each local predicts (`x_i- = f(x_m, u)`, `P_i- = F P_i F' + Q_i = P_m- / beta_i`, with `F`
+///    taken at `x_m`, so the prediction is computed once) and updates with its own sensor,
+///    linearized at the common prediction;
+/// 3. the master fuses them: `P_m^-1 = sum P_i^-1`, `P_m^-1 x_m = sum P_i^-1 x_i`.
+///
+/// The shared prior information is split `beta_1 + beta_2 = 1` between the locals, so it is
+/// counted once: the result equals the centralized (E)KF processing both sensors together.
+/// The model's `constrain` is applied to the predicted state and to the fused state.
+#[derive(Debug, Clone)]
+pub struct FederatedFilter<
+    T,
+    O1,
+    O2,
+    const N: usize,
+    const M1: usize,
+    const M2: usize,
+    const U: usize,
+> {
+    transition: T,
+    observation1: O1,
+    observation2: O2,
+    x: SVector<f64, N>,
+    p: SMatrix<f64, N, N>,
+    noise: FusionNoise<N, M1, M2>,
+    beta: [f64; 2],
+    local_x: [SVector<f64, N>; 2],
+    local_p: [SMatrix<f64, N, N>; 2],
+}
+
+impl<T, O1, O2, const N: usize, const M1: usize, const M2: usize, const U: usize>
+    FederatedFilter<T, O1, O2, N, M1, M2, U>
+where
+    T: TransitionModel<N, U>,
+    O1: ObservationModel<N, M1, U>,
+    O2: ObservationModel<N, M2, U>,
+{
+    /// Builds the filter. `p0`, `r1`, `r2` must be symmetric positive definite, `q` positive
+    /// semidefinite, `beta` positive and summing to 1 (within 1e-9).
+    pub fn new(
+        transition: T,
+        observation1: O1,
+        observation2: O2,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+        noise: FusionNoise<N, M1, M2>,
+        beta: [f64; 2],
+    ) -> Result<Self, ConfigError> {
+        check_covariance("P0", &p0, true)?;
+        check_covariance("Q", &noise.q, false)?;
+        check_covariance("R1", &noise.r1, true)?;
+        check_covariance("R2", &noise.r2, true)?;
+        check_finite_state(&x0)?;
+        for &b in &beta {
+            if !(b > 0.0 && b.is_finite()) {
+                return Err(ConfigError::InvalidParameter {
+                    name: "beta",
+                    value: b,
+                    reason: "information-sharing factors must be positive and finite",
+                });
+            }
+        }
+        let sum = beta[0] + beta[1];
+        if (sum - 1.0).abs() > 1e-9 {
+            return Err(ConfigError::InvalidParameter {
+                name: "beta",
+                value: sum,
+                reason: "information-sharing factors must sum to 1",
+            });
+        }
+        Ok(Self {
+            transition,
+            observation1,
+            observation2,
+            x: x0,
+            p: p0,
+            noise,
+            beta,
+            local_x: [x0; 2],
+            local_p: [p0 / beta[0], p0 / beta[1]],
+        })
+    }
+
+    /// One step: reset, local predict and update, master fusion. On success the master holds
+    /// the fused estimate and the locals their posteriors (see [`Self::local_estimate`]).
+    ///
+    /// `local1`, `local2` in the result are the locals' own innovations, whose covariance uses
+    /// the inflated `P_i- = P_m- / beta_i` (so their NIS is deflated and not chi-square on its
+    /// own). `nis` is the innovation of both sensors together against the master prediction,
+    /// `r' S^-1 r` with `S = H P_m- H' + blockdiag(R1, R2)` and `H` the stacked Jacobians at the
+    /// prediction (computed sequentially, without forming the stacked vectors); it equals the
+    /// centralized EKF's NIS and is chi-square with `M1 + M2` degrees of freedom when the
+    /// filter is consistent.
+    ///
+    /// Inputs and measurements are checked first; on any error nothing changes.
+    pub fn step(
+        &mut self,
+        u: &SVector<f64, U>,
+        y1: &SVector<f64, M1>,
+        y2: &SVector<f64, M2>,
+    ) -> Result<FusedStep<N, M1, M2>, FilterError> {
+        check_input(u)?;
+        check_measurement(y1, &[true; M1])?;
+        check_measurement(y2, &[true; M2])?;
+
+        // Common prediction from the master (steps 1 and 2: every local would compute the same
+        // x_m- and, scaled by 1/beta_i, the same P_m-).
+        let f = self.transition.transition_jacobian(&self.x, u);
+        let mut xp = self.transition.transition(&self.x, u);
+        self.transition.constrain(&mut xp);
+        let mut pp = f * self.p * f.transpose() + self.noise.q;
+        symmetrize(&mut pp);
+        if !all_finite(&xp) || !all_finite(&pp) {
+            return Err(FilterError::NonFiniteResult {
+                which: "prediction",
+            });
+        }
+
+        let h1 = self.observation1.observation_jacobian(&xp, u);
+        let yp1 = self.observation1.observe(&xp, u);
+        let h2 = self.observation2.observation_jacobian(&xp, u);
+        let yp2 = self.observation2.observe(&xp, u);
+
+        // Local updates with the shared-out covariances.
+        let p1 = pp / self.beta[0];
+        let pxy1 = p1 * h1.transpose();
+        let c1 = correct(
+            &xp,
+            &p1,
+            y1,
+            &yp1,
+            h1 * pxy1 + self.noise.r1,
+            pxy1,
+            &[true; M1],
+        )?;
+        let p2 = pp / self.beta[1];
+        let pxy2 = p2 * h2.transpose();
+        let c2 = correct(
+            &xp,
+            &p2,
+            y2,
+            &yp2,
+            h2 * pxy2 + self.noise.r2,
+            pxy2,
+            &[true; M2],
+        )?;
+
+        // Step 3: master fusion.
+        let (mut x, p) = fuse_information(&[c1.x, c2.x], &[c1.p_chol, c2.p_chol])?;
+        self.transition.constrain(&mut x);
+
+        // Joint innovation against the master prediction, by the chain rule
+        // r' S^-1 r = NIS(y1 | prior) + NIS(y2 | prior, y1), both linearized at the prediction.
+        let pxy = pp * h1.transpose();
+        let s1 = correct(
+            &xp,
+            &pp,
+            y1,
+            &yp1,
+            h1 * pxy + self.noise.r1,
+            pxy,
+            &[true; M1],
+        )?;
+        let pxy = s1.p * h2.transpose();
+        let yp2_given1 = yp2 + h2 * (s1.x - xp);
+        let s2 = correct(
+            &s1.x,
+            &s1.p,
+            y2,
+            &yp2_given1,
+            h2 * pxy + self.noise.r2,
+            pxy,
+            &[true; M2],
+        )?;
+
+        self.x = x;
+        self.p = p;
+        self.local_x = [c1.x, c2.x];
+        self.local_p = [c1.p, c2.p];
+        Ok(FusedStep {
+            x,
+            p,
+            local1: c1.innovation,
+            local2: c2.innovation,
+            nis: s1.innovation.nis + s2.innovation.nis,
+            dof: M1 + M2,
+        })
+    }
+
+    /// Replaces the master estimate. On error nothing changes.
+    pub fn reset(&mut self, x: SVector<f64, N>, p: SMatrix<f64, N, N>) -> Result<(), ConfigError> {
+        check_covariance("P", &p, true)?;
+        check_finite_state(&x)?;
+        self.x = x;
+        self.p = p;
+        Ok(())
+    }
+
+    /// Fused (master) state estimate.
+    pub fn state(&self) -> &SVector<f64, N> {
+        &self.x
+    }
+
+    /// Fused (master) covariance.
+    pub fn covariance(&self) -> &SMatrix<f64, N, N> {
+        &self.p
+    }
+
+    /// Posterior estimate `(x_i, P_i)` of local filter `i` (0 or 1) after the last step. `P_i`
+    /// includes the `1 / beta_i` inflation of the shared prior. Panics if `i > 1`.
+    pub fn local_estimate(&self, i: usize) -> (&SVector<f64, N>, &SMatrix<f64, N, N>) {
+        (&self.local_x[i], &self.local_p[i])
+    }
+
+    /// The information-sharing factors.
+    pub fn shares(&self) -> [f64; 2] {
+        self.beta
+    }
+}
