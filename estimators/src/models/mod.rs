@@ -1,4 +1,5 @@
 //! Plant models implementing [`crate::TransitionModel`] and [`crate::ObservationModel`].
 
+pub mod intake;
 pub mod linear;
 pub mod throttle;

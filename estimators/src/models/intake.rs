@@ -1,0 +1,784 @@
+//! Mean-value model of the intake manifold of a naturally aspirated 2.0 L four-cylinder engine
+//! with EGR, after the MAP/MAF EKF paper (shared/REFERENCE.md §2), sampled once per 180 deg crank
+//! segment: `dt = 30 / N` s (N in rpm), so the step length changes with every segment.
+//!
+//! State `x = [p_m, p_mes, W_thr, W_mes, q1, q2]`: manifold pressure (Pa), MAP sensor output (Pa),
+//! throttle mass flow (kg/s), MAF sensor output (kg/s), pumping-fluctuation pressure `q` (Pa) and
+//! its rate `q'` (Pa/s). Input `u = [N, theta, e]` (indices [`U_SPEED`], [`U_THROTTLE`],
+//! [`U_EGR`]): engine speed (rpm), throttle opening (deg from the closed plate, `0..90 -
+//! throttle_closed_angle_deg`) and EGR valve position (`0..1`). The step length is computed
+//! inside from `u[0]`, so the generic filters need no change for the varying `dt`.
+//!
+//! Continuous model (what [`IntakeModel::continuous_derivative`] returns, integrated finely by
+//! [`IntakeModel::integrate_rk4`] as the truth):
+//!
+//! ```text
+//! dp_m/dt   = R T_m / V_m (W_thr(p_m, theta) + W_egr(p_m, e) - W_inv(p_m, N))
+//! dp_mes/dt = (p_m + q1 - p_mes) / tau_map
+//! dW_mes/dt = (W_thr(p_m, theta) - W_mes) / tau_maf
+//! q1' = q2,  q2' = -w^2 q1 - 2 xi w q2,   w = 2 pi N / 30 rad/s
+//! ```
+//!
+//! with `W_thr` algebraic (the nozzle flow; the truth stores its current value in `x[2]`).
+//!
+//! How we read the paper and where we depart from it:
+//! - **Nozzle flow** `W = p_up A / sqrt(R T_up) Psi(psi)`, `psi = p_down / p_up`: choked
+//!   (`psi < psi_crit = (2/(k+1))^(k/(k-1))`, 0.5283 for k = 1.4) and subsonic (`psi_crit <= psi
+//!   < 0.97`) as in the paper. For `psi >= 0.97` the paper takes the throttle flow equal to the
+//!   intake-valve flow, because the flow function is too steep there to compute the flow from the
+//!   pressure ratio. Used literally inside `dp_m/dt` that rule freezes the pressure (with EGR
+//!   closed `dp_m/dt = 0`, and the manifold could never leave the region when the throttle
+//!   closes). We therefore continue `Psi` **linearly** from `Psi(0.97)` to zero at `psi = 1`
+//!   (the linearization near `psi = 1` of Eriksson & Nielsen, *Modeling and Control of Engines
+//!   and Drivelines*, 2014, §7.4), which keeps `Psi` continuous and its slope finite. In that
+//!   region the manifold is then a fast first-order system whose quasi-steady state is
+//!   `W_thr = W_inv - W_egr`: the paper's rule (the EGR is closed at the loads where the
+//!   throttle is this wide open). `psi >= 1` (reverse flow) gives zero flow; a negative or NaN
+//!   ratio is treated as 0 (choked) so that no NaN can come out of a flow.
+//! - **EGR**: the same nozzle with upstream `p_egr`, `T_egr`, area `e * A_egr_max` (a linear
+//!   valve characteristic, our choice).
+//! - **Throttle area** (the paper gives none): `A(theta) = A_leak + Cd pi D^2 / 4 (1 - cos(a0 +
+//!   theta) / cos(a0))` with the plate's closed angle `a0` (Heywood, *Internal Combustion Engine
+//!   Fundamentals*, 1988, §7.2.1). `theta` is clamped to its range.
+//! - **Intake valve**: `W_inv = eta_slope(N) p_m - eta_ofs(N)`, slope and offset interpolated
+//!   linearly over speed between the mapped points and held constant outside them.
+//! - **Pumping fluctuation**: the paper's oscillator has no input, so `q` only decays from its
+//!   initial state; a filter must give `q1, q2` process noise to keep it alive. It is
+//!   discretized exactly with the closed-form `expm(A dt)` ([`oscillator_transition`]); this
+//!   needs `0 <= xi < 1`. At `dt = 30 / N` a step is one undamped period of the oscillation.
+//! - **Discrete model** ([`TransitionModel`]): the step is cut into `n = ceil(dt /
+//!   max_substep_s)` equal substeps. In each, `p_m` advances by an exponential (Rosenbrock)
+//!   Euler step, `p+ = p + h f(p) phi1(h f'(p))`, exact for the linear part and stable however
+//!   stiff the steep region makes it (the paper's plain Euler at `dt = 37.5 ms` is not); the
+//!   sensor lags are discretized exactly for an input linear across the substep (first-order
+//!   hold, `a = exp(-h / tau)` rather than the paper's `(1 + h/tau)^-1`, which at 800 rpm and
+//!   `tau_map = 7 ms` would leave 17 % instead of 0.5 % of the old reading); and the oscillator's
+//!   exact contribution to the MAP lag is added in closed form. `W_thr` is either recomputed from
+//!   the nozzle model at the end of the step ([`ThrottleFlow::Nozzle`], what tracks the
+//!   continuous model) or carried as a random walk ([`ThrottleFlow::RandomWalk`], the paper's
+//!   filter; then `p_m` uses the state's `W_thr` held over the step).
+//! - **Bad input**: [`IntakeModel::check_input`] and [`IntakeModel::check_measurement`] name
+//!   the offending value; the monitor calls them before a filter step. A transition with an
+//!   input they would refuse returns the state unchanged rather than NaN.
+
+use std::f64::consts::PI;
+
+use nalgebra::{Matrix2, SMatrix, SVector, Vector1, Vector2, Vector3};
+use serde::Deserialize;
+use thiserror::Error;
+
+use crate::model::{ObservationModel, TransitionModel};
+
+/// The state vector `[p_m, p_mes, W_thr, W_mes, q1, q2]`.
+pub type IntakeState = SVector<f64, 6>;
+/// The input vector `[N (rpm), theta (deg), e (0..1)]`.
+pub type IntakeInput = Vector3<f64>;
+
+/// Index of the engine speed (rpm) in the input.
+pub const U_SPEED: usize = 0;
+/// Index of the throttle opening (deg from closed) in the input.
+pub const U_THROTTLE: usize = 1;
+/// Index of the EGR valve position (0..1) in the input.
+pub const U_EGR: usize = 2;
+/// State index of the manifold pressure (Pa).
+pub const X_PM: usize = 0;
+/// State index of the MAP sensor output (Pa).
+pub const X_PMES: usize = 1;
+/// State index of the throttle mass flow (kg/s).
+pub const X_WTHR: usize = 2;
+/// State index of the MAF sensor output (kg/s).
+pub const X_WMES: usize = 3;
+/// State index of the pumping fluctuation `q` (Pa).
+pub const X_Q1: usize = 4;
+/// State index of the pumping fluctuation rate `q'` (Pa/s).
+pub const X_Q2: usize = 5;
+
+/// Intake model parameters (the `[model]` table of `config/intake.toml`). Units are in the names.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IntakeParams {
+    /// Ambient (throttle upstream) pressure `p_a` (Pa).
+    pub ambient_pressure_pa: f64,
+    /// Ambient (throttle upstream) temperature `T_a` (K).
+    pub ambient_temperature_k: f64,
+    /// Specific gas constant of air `R` (J/(kg K)).
+    pub gas_constant_j_per_kg_k: f64,
+    /// Ratio of specific heats `k` (-).
+    pub heat_capacity_ratio: f64,
+    /// Manifold volume `V_m` (m^3).
+    pub manifold_volume_m3: f64,
+    /// Manifold temperature `T_m` (K), fixed (isothermal manifold).
+    pub manifold_temperature_k: f64,
+    /// Throttle bore `D` (m).
+    pub throttle_bore_m: f64,
+    /// Throttle discharge coefficient `Cd` (-).
+    pub throttle_discharge_coefficient: f64,
+    /// Plate angle at the closed stop `a0` (deg from the plane normal to the bore).
+    pub throttle_closed_angle_deg: f64,
+    /// Leakage area of the closed throttle (m^2).
+    pub throttle_leak_area_m2: f64,
+    /// EGR upstream (exhaust) pressure `p_egr` (Pa).
+    pub egr_upstream_pressure_pa: f64,
+    /// EGR gas temperature at the valve `T_egr` (K).
+    pub egr_temperature_k: f64,
+    /// Effective EGR valve area when fully open (m^2).
+    pub egr_max_area_m2: f64,
+    /// Pressure ratio above which the flow function is continued linearly to zero at 1 (the
+    /// paper's 0.97).
+    pub steep_ratio: f64,
+    /// Speeds (rpm) of the volumetric-efficiency map, strictly increasing.
+    pub vol_eff_speeds_rpm: Vec<f64>,
+    /// `eta_slope` at each mapped speed (kg/(s Pa)).
+    pub vol_eff_slope_kg_per_s_pa: Vec<f64>,
+    /// `eta_ofs` at each mapped speed (kg/s).
+    pub vol_eff_offset_kg_per_s: Vec<f64>,
+    /// MAP sensor time constant `tau_map` (s).
+    pub map_time_constant_s: f64,
+    /// MAF sensor time constant `tau_maf` (s).
+    pub maf_time_constant_s: f64,
+    /// Damping ratio `xi` of the pumping-fluctuation oscillator, `0 <= xi < 1`.
+    pub pump_damping: f64,
+    /// Lowest engine speed a step is computed for (rpm); slower is refused.
+    pub min_speed_rpm: f64,
+    /// Highest engine speed accepted (rpm).
+    pub max_speed_rpm: f64,
+    /// Longest substep of the discrete model (s).
+    pub max_substep_s: f64,
+    /// Largest plausible MAP reading as a multiple of `p_a` (pulsation and sensor error above
+    /// ambient); higher readings are refused.
+    pub max_map_ratio: f64,
+    /// MAP sensor noise standard deviation (Pa).
+    pub map_noise_std_pa: f64,
+    /// MAF sensor noise standard deviation relative to the reading (-).
+    pub maf_noise_rel: f64,
+}
+
+fn positive(name: &'static str, v: f64) -> Result<(), String> {
+    if !v.is_finite() {
+        return Err(format!("`{name}` = {v} is not finite"));
+    }
+    if !(v > 0.0) {
+        return Err(format!("`{name}` = {v} must be positive"));
+    }
+    Ok(())
+}
+
+impl IntakeParams {
+    /// Checks the ranges the model relies on, naming the offending key.
+    pub fn validate(&self) -> Result<(), String> {
+        let pos = [
+            ("ambient_pressure_pa", self.ambient_pressure_pa),
+            ("ambient_temperature_k", self.ambient_temperature_k),
+            ("gas_constant_j_per_kg_k", self.gas_constant_j_per_kg_k),
+            ("manifold_volume_m3", self.manifold_volume_m3),
+            ("manifold_temperature_k", self.manifold_temperature_k),
+            ("throttle_bore_m", self.throttle_bore_m),
+            (
+                "throttle_discharge_coefficient",
+                self.throttle_discharge_coefficient,
+            ),
+            ("egr_upstream_pressure_pa", self.egr_upstream_pressure_pa),
+            ("egr_temperature_k", self.egr_temperature_k),
+            ("map_time_constant_s", self.map_time_constant_s),
+            ("maf_time_constant_s", self.maf_time_constant_s),
+            ("min_speed_rpm", self.min_speed_rpm),
+            ("max_speed_rpm", self.max_speed_rpm),
+            ("max_substep_s", self.max_substep_s),
+            ("max_map_ratio", self.max_map_ratio),
+            ("map_noise_std_pa", self.map_noise_std_pa),
+            ("maf_noise_rel", self.maf_noise_rel),
+        ];
+        for (k, v) in pos {
+            positive(k, v)?;
+        }
+        let nonneg = [
+            ("throttle_leak_area_m2", self.throttle_leak_area_m2),
+            ("egr_max_area_m2", self.egr_max_area_m2),
+            ("throttle_closed_angle_deg", self.throttle_closed_angle_deg),
+            ("pump_damping", self.pump_damping),
+        ];
+        for (k, v) in nonneg {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("`{k}` = {v} must be finite and >= 0"));
+            }
+        }
+        let k = self.heat_capacity_ratio;
+        if !(k.is_finite() && k > 1.0) {
+            return Err(format!("`heat_capacity_ratio` = {k} must be > 1"));
+        }
+        if !(self.throttle_closed_angle_deg < 45.0) {
+            return Err(format!(
+                "`throttle_closed_angle_deg` = {} must be below 45",
+                self.throttle_closed_angle_deg
+            ));
+        }
+        if !(self.pump_damping < 1.0) {
+            return Err(format!(
+                "`pump_damping` = {} must be below 1 (underdamped oscillator)",
+                self.pump_damping
+            ));
+        }
+        let crit = critical_ratio(k);
+        if !(self.steep_ratio.is_finite() && self.steep_ratio > crit && self.steep_ratio < 1.0) {
+            return Err(format!(
+                "`steep_ratio` = {} must lie between the critical ratio {crit:.4} and 1",
+                self.steep_ratio
+            ));
+        }
+        if !(self.min_speed_rpm < self.max_speed_rpm) {
+            return Err(format!(
+                "`min_speed_rpm` = {} must be below `max_speed_rpm` = {}",
+                self.min_speed_rpm, self.max_speed_rpm
+            ));
+        }
+        if !(self.max_map_ratio >= 1.0) {
+            return Err(format!(
+                "`max_map_ratio` = {} must be at least 1",
+                self.max_map_ratio
+            ));
+        }
+        let n = self.vol_eff_speeds_rpm.len();
+        if n == 0 {
+            return Err("`vol_eff_speeds_rpm` is empty".into());
+        }
+        if self.vol_eff_slope_kg_per_s_pa.len() != n {
+            return Err(format!(
+                "`vol_eff_slope_kg_per_s_pa` has {} entries, `vol_eff_speeds_rpm` {n}",
+                self.vol_eff_slope_kg_per_s_pa.len()
+            ));
+        }
+        if self.vol_eff_offset_kg_per_s.len() != n {
+            return Err(format!(
+                "`vol_eff_offset_kg_per_s` has {} entries, `vol_eff_speeds_rpm` {n}",
+                self.vol_eff_offset_kg_per_s.len()
+            ));
+        }
+        for i in 0..n {
+            let s = self.vol_eff_speeds_rpm[i];
+            if !s.is_finite() || (i > 0 && !(s > self.vol_eff_speeds_rpm[i - 1])) {
+                return Err(format!(
+                    "`vol_eff_speeds_rpm[{i}]` = {s} must be finite and strictly increasing"
+                ));
+            }
+            let sl = self.vol_eff_slope_kg_per_s_pa[i];
+            if !(sl.is_finite() && sl > 0.0) {
+                return Err(format!(
+                    "`vol_eff_slope_kg_per_s_pa[{i}]` = {sl} must be positive"
+                ));
+            }
+            let of = self.vol_eff_offset_kg_per_s[i];
+            if !of.is_finite() {
+                return Err(format!(
+                    "`vol_eff_offset_kg_per_s[{i}]` = {of} is not finite"
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A refused input or measurement, naming the quantity and its value.
+#[derive(Debug, Clone, Copy, PartialEq, Error)]
+pub enum IntakeInputError {
+    /// A value is NaN or infinite.
+    #[error("{name} is not finite ({value})")]
+    NonFinite { name: &'static str, value: f64 },
+    /// A value is outside its admissible range.
+    #[error("{name} = {value} is outside [{min}, {max}]")]
+    OutOfRange {
+        name: &'static str,
+        value: f64,
+        min: f64,
+        max: f64,
+    },
+}
+
+/// How the discrete model moves the throttle-flow state `W_thr`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ThrottleFlow {
+    /// `W_thr` is recomputed each step from the nozzle model at the new manifold pressure, and
+    /// the pressure dynamics use the nozzle flow along the step. Tracks the continuous model.
+    #[default]
+    Nozzle,
+    /// `W_thr` is a random walk (the paper's filter), held over the step in the pressure dynamics.
+    RandomWalk,
+}
+
+/// Critical pressure ratio `(2/(k+1))^(k/(k-1))`.
+pub fn critical_ratio(k: f64) -> f64 {
+    (2.0 / (k + 1.0)).powf(k / (k - 1.0))
+}
+
+/// Subsonic flow function `sqrt(2k/(k-1) (psi^(2/k) - psi^((k+1)/k)))` and its derivative.
+fn subsonic(psi: f64, k: f64) -> (f64, f64) {
+    let c = 2.0 * k / (k - 1.0);
+    let a = psi.powf(2.0 / k);
+    let b = psi.powf((k + 1.0) / k);
+    let inner = (c * (a - b)).max(0.0);
+    let val = inner.sqrt();
+    let dinner = c * ((2.0 / k) * a / psi - ((k + 1.0) / k) * b / psi);
+    let der = if val > 0.0 { 0.5 * dinner / val } else { 0.0 };
+    (val, der)
+}
+
+/// The flow function `Psi(psi)` of the three regimes (choked, subsonic, linear continuation
+/// above `steep`) and its derivative `dPsi/dpsi`. Ratios below 0, NaN or above 1 are handled as
+/// described in the module docs (choked, choked, zero).
+pub fn flow_function(psi: f64, k: f64, steep: f64) -> (f64, f64) {
+    let crit = critical_ratio(k);
+    let psi = if psi.is_nan() { 0.0 } else { psi };
+    if psi < crit {
+        // (k (2/(k+1))^((k+1)/(k-1)))^(1/2), equal to the subsonic formula at psi_crit.
+        (
+            (k * (2.0 / (k + 1.0)).powf((k + 1.0) / (k - 1.0))).sqrt(),
+            0.0,
+        )
+    } else if psi < steep {
+        subsonic(psi, k)
+    } else if psi < 1.0 {
+        let top = subsonic(steep, k).0;
+        let slope = -top / (1.0 - steep);
+        (top + slope * (psi - steep), slope)
+    } else {
+        (0.0, 0.0)
+    }
+}
+
+/// `expm(A t)` for `A = [[0, 1], [-w^2, -2 xi w]]` with `0 <= xi < 1`, in closed form:
+/// `exp(-xi w t) (cos(wd t) I + sin(wd t) / wd (A + xi w I))`, `wd = w sqrt(1 - xi^2)`.
+pub fn oscillator_transition(w: f64, xi: f64, t: f64) -> Matrix2<f64> {
+    let wd = w * (1.0 - xi * xi).sqrt();
+    let decay = (-xi * w * t).exp();
+    let (s, c) = (wd * t).sin_cos();
+    // sin(wd t) / wd, finite as wd -> 0.
+    let sw = if wd * t == 0.0 { t } else { s / wd };
+    decay * Matrix2::new(c + sw * xi * w, sw, -sw * w * w, c - sw * xi * w)
+}
+
+/// Output after `h` of a first-order lag with time constant `tau` from `y`, for an input
+/// linear from `u0` to `u1` over the interval (exact).
+#[inline]
+fn lag_foh(y: f64, u0: f64, u1: f64, h: f64, tau: f64) -> f64 {
+    let r = h / tau;
+    let one_minus_a = -(-r).exp_m1();
+    let a = 1.0 - one_minus_a;
+    let ramp = if r < 1e-4 {
+        // 1 - (1 - e^-r)/r = r/2 - r^2/6 + ...
+        r / 2.0 - r * r / 6.0
+    } else {
+        1.0 - one_minus_a / r
+    };
+    a * y + one_minus_a * u0 + (u1 - u0) * ramp
+}
+
+/// `phi1(z) = (e^z - 1) / z`.
+#[inline]
+fn phi1(z: f64) -> f64 {
+    if z.abs() < 1e-8 {
+        1.0 + z / 2.0
+    } else {
+        z.exp_m1() / z
+    }
+}
+
+/// The intake manifold model: continuous truth and per-segment discrete transition.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IntakeModel {
+    params: IntakeParams,
+    flow: ThrottleFlow,
+    /// `R T_m / V_m` (Pa / kg).
+    gain: f64,
+    /// `p_a / sqrt(R T_a)` (kg / (s m^2)).
+    thr_scale: f64,
+    /// `p_egr / sqrt(R T_egr)`.
+    egr_scale: f64,
+}
+
+impl IntakeModel {
+    /// Wraps validated parameters; `flow` chooses how the discrete model moves `W_thr`.
+    pub fn new(params: IntakeParams, flow: ThrottleFlow) -> Result<Self, String> {
+        params.validate()?;
+        let r = params.gas_constant_j_per_kg_k;
+        Ok(Self {
+            gain: r * params.manifold_temperature_k / params.manifold_volume_m3,
+            thr_scale: params.ambient_pressure_pa / (r * params.ambient_temperature_k).sqrt(),
+            egr_scale: params.egr_upstream_pressure_pa / (r * params.egr_temperature_k).sqrt(),
+            params,
+            flow,
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &IntakeParams {
+        &self.params
+    }
+
+    /// How `W_thr` is moved.
+    pub fn throttle_flow_mode(&self) -> ThrottleFlow {
+        self.flow
+    }
+
+    /// Segment length `30 / N` (s) for a speed in rpm.
+    #[inline]
+    pub fn segment_dt(speed_rpm: f64) -> f64 {
+        30.0 / speed_rpm
+    }
+
+    /// Pulsation frequency `w = 2 pi N / 30` (rad/s).
+    #[inline]
+    pub fn pump_frequency(speed_rpm: f64) -> f64 {
+        2.0 * PI * speed_rpm / 30.0
+    }
+
+    /// Refuses inputs the model must not be stepped with: a non-finite component, a speed
+    /// outside `[min_speed_rpm, max_speed_rpm]` (so 0 and negative speeds), a throttle opening
+    /// outside `[0, 90 - a0]` deg, an EGR position outside `[0, 1]`.
+    pub fn check_input(&self, u: &IntakeInput) -> Result<(), IntakeInputError> {
+        let p = &self.params;
+        let checks = [
+            (
+                "engine speed (rpm)",
+                u[U_SPEED],
+                p.min_speed_rpm,
+                p.max_speed_rpm,
+            ),
+            (
+                "throttle opening (deg)",
+                u[U_THROTTLE],
+                0.0,
+                90.0 - p.throttle_closed_angle_deg,
+            ),
+            ("EGR valve position", u[U_EGR], 0.0, 1.0),
+        ];
+        for (name, value, min, max) in checks {
+            if !value.is_finite() {
+                return Err(IntakeInputError::NonFinite { name, value });
+            }
+            if !(value >= min && value <= max) {
+                return Err(IntakeInputError::OutOfRange {
+                    name,
+                    value,
+                    min,
+                    max,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Refuses implausible sensor readings: non-finite, a MAP below 0 or above `max_map_ratio *
+    /// p_a` (the manifold of a naturally aspirated engine cannot be much above ambient), a
+    /// negative MAF beyond five noise deviations of a zero flow.
+    pub fn check_measurement(&self, map_pa: f64, maf_kg_s: f64) -> Result<(), IntakeInputError> {
+        let p = &self.params;
+        if !map_pa.is_finite() {
+            return Err(IntakeInputError::NonFinite {
+                name: "MAP (Pa)",
+                value: map_pa,
+            });
+        }
+        if !maf_kg_s.is_finite() {
+            return Err(IntakeInputError::NonFinite {
+                name: "MAF (kg/s)",
+                value: maf_kg_s,
+            });
+        }
+        let max = p.max_map_ratio * p.ambient_pressure_pa;
+        if !(map_pa >= 0.0 && map_pa <= max) {
+            return Err(IntakeInputError::OutOfRange {
+                name: "MAP (Pa)",
+                value: map_pa,
+                min: 0.0,
+                max,
+            });
+        }
+        if maf_kg_s < -1e-3 {
+            return Err(IntakeInputError::OutOfRange {
+                name: "MAF (kg/s)",
+                value: maf_kg_s,
+                min: -1e-3,
+                max: f64::INFINITY,
+            });
+        }
+        Ok(())
+    }
+
+    fn input_ok(&self, u: &IntakeInput) -> bool {
+        let p = &self.params;
+        u.iter().all(|v| v.is_finite())
+            && u[U_SPEED] >= p.min_speed_rpm
+            && u[U_SPEED] <= p.max_speed_rpm
+    }
+
+    /// Effective throttle area (m^2) at opening `theta_deg` (clamped to `[0, 90 - a0]`).
+    pub fn throttle_area(&self, theta_deg: f64) -> f64 {
+        let p = &self.params;
+        let a0 = p.throttle_closed_angle_deg;
+        let th = if theta_deg.is_nan() {
+            0.0
+        } else {
+            theta_deg.clamp(0.0, 90.0 - a0)
+        };
+        let open = 1.0 - (a0 + th).to_radians().cos() / a0.to_radians().cos();
+        p.throttle_leak_area_m2
+            + p.throttle_discharge_coefficient * PI * p.throttle_bore_m.powi(2) / 4.0 * open
+    }
+
+    /// Effective EGR area (m^2) at position `e` (clamped to `[0, 1]`).
+    pub fn egr_area(&self, e: f64) -> f64 {
+        let e = if e.is_nan() { 0.0 } else { e.clamp(0.0, 1.0) };
+        e * self.params.egr_max_area_m2
+    }
+
+    /// Throttle flow (kg/s) and its derivative with respect to `p_m`, for an effective area.
+    pub fn throttle_flow_area(&self, p_m: f64, area: f64) -> (f64, f64) {
+        let p = &self.params;
+        let (f, d) = flow_function(
+            p_m / p.ambient_pressure_pa,
+            p.heat_capacity_ratio,
+            p.steep_ratio,
+        );
+        let s = self.thr_scale * area;
+        (s * f, s * d / p.ambient_pressure_pa)
+    }
+
+    /// Throttle flow (kg/s) at manifold pressure `p_m` (Pa) and opening `theta_deg`.
+    pub fn throttle_flow(&self, p_m: f64, theta_deg: f64) -> f64 {
+        self.throttle_flow_area(p_m, self.throttle_area(theta_deg))
+            .0
+    }
+
+    /// EGR flow (kg/s) and its derivative with respect to `p_m`, for an effective area.
+    pub fn egr_flow_area(&self, p_m: f64, area: f64) -> (f64, f64) {
+        let p = &self.params;
+        let (f, d) = flow_function(
+            p_m / p.egr_upstream_pressure_pa,
+            p.heat_capacity_ratio,
+            p.steep_ratio,
+        );
+        let s = self.egr_scale * area;
+        (s * f, s * d / p.egr_upstream_pressure_pa)
+    }
+
+    /// EGR flow (kg/s) at manifold pressure `p_m` (Pa) and valve position `e`.
+    pub fn egr_flow(&self, p_m: f64, e: f64) -> f64 {
+        self.egr_flow_area(p_m, self.egr_area(e)).0
+    }
+
+    /// `(eta_slope, eta_ofs)` at `speed_rpm`, linear between mapped speeds, constant outside.
+    pub fn vol_eff(&self, speed_rpm: f64) -> (f64, f64) {
+        let p = &self.params;
+        let s = &p.vol_eff_speeds_rpm;
+        let (sl, of) = (&p.vol_eff_slope_kg_per_s_pa, &p.vol_eff_offset_kg_per_s);
+        let last = s.len() - 1;
+        if !(speed_rpm > s[0]) {
+            return (sl[0], of[0]);
+        }
+        if speed_rpm >= s[last] {
+            return (sl[last], of[last]);
+        }
+        let i = s.partition_point(|&v| v <= speed_rpm) - 1;
+        let t = (speed_rpm - s[i]) / (s[i + 1] - s[i]);
+        (
+            sl[i] + t * (sl[i + 1] - sl[i]),
+            of[i] + t * (of[i + 1] - of[i]),
+        )
+    }
+
+    /// Intake-valve flow `eta_slope p_m - eta_ofs` (kg/s).
+    pub fn intake_valve_flow(&self, p_m: f64, speed_rpm: f64) -> f64 {
+        let (s, o) = self.vol_eff(speed_rpm);
+        s * p_m - o
+    }
+
+    /// Continuous-time derivative of the state (the truth model). `x[2]` is algebraic in the
+    /// continuous model, so its derivative is returned as 0; [`Self::integrate_rk4`] stores the
+    /// current nozzle flow in it.
+    pub fn continuous_derivative(&self, x: &IntakeState, u: &IntakeInput) -> IntakeState {
+        let p = &self.params;
+        let n = u[U_SPEED];
+        let w_thr = self.throttle_flow(x[X_PM], u[U_THROTTLE]);
+        let w_egr = self.egr_flow(x[X_PM], u[U_EGR]);
+        let w_inv = self.intake_valve_flow(x[X_PM], n);
+        let w = Self::pump_frequency(n);
+        IntakeState::from([
+            self.gain * (w_thr + w_egr - w_inv),
+            (x[X_PM] + x[X_Q1] - x[X_PMES]) / p.map_time_constant_s,
+            0.0,
+            (w_thr - x[X_WMES]) / p.maf_time_constant_s,
+            x[X_Q2],
+            -w * w * x[X_Q1] - 2.0 * p.pump_damping * w * x[X_Q2],
+        ])
+    }
+
+    /// Integrates the continuous model over `dt` with `substeps` classical RK4 steps at a
+    /// constant input, and sets `x[2]` to the throttle flow at the end. Returns `x` unchanged
+    /// for a non-finite input or `substeps == 0`.
+    pub fn integrate_rk4(
+        &self,
+        x: &IntakeState,
+        u: &IntakeInput,
+        dt: f64,
+        substeps: usize,
+    ) -> IntakeState {
+        if substeps == 0 || !dt.is_finite() || u.iter().any(|v| !v.is_finite()) {
+            return *x;
+        }
+        let h = dt / substeps as f64;
+        let mut z = *x;
+        for _ in 0..substeps {
+            let k1 = self.continuous_derivative(&z, u);
+            let k2 = self.continuous_derivative(&(z + k1 * (h / 2.0)), u);
+            let k3 = self.continuous_derivative(&(z + k2 * (h / 2.0)), u);
+            let k4 = self.continuous_derivative(&(z + k3 * h), u);
+            z += (k1 + 2.0 * k2 + 2.0 * k3 + k4) * (h / 6.0);
+        }
+        z[X_WTHR] = self.throttle_flow(z[X_PM], u[U_THROTTLE]);
+        z
+    }
+
+    /// The steady state under a constant input: `p_m` where throttle plus EGR flow equals the
+    /// intake-valve flow (bisection), sensors reading it, no pulsation. `None` for an input
+    /// [`Self::check_input`] refuses.
+    pub fn equilibrium(&self, u: &IntakeInput) -> Option<IntakeState> {
+        self.check_input(u).ok()?;
+        let a_thr = self.throttle_area(u[U_THROTTLE]);
+        let a_egr = self.egr_area(u[U_EGR]);
+        let f = |pm: f64| {
+            self.throttle_flow_area(pm, a_thr).0 + self.egr_flow_area(pm, a_egr).0
+                - self.intake_valve_flow(pm, u[U_SPEED])
+        };
+        let (mut lo, mut hi) = (
+            0.0,
+            self.params
+                .ambient_pressure_pa
+                .max(self.params.egr_upstream_pressure_pa),
+        );
+        if f(hi) > 0.0 {
+            return None;
+        }
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if f(mid) > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let pm = 0.5 * (lo + hi);
+        let w = self.throttle_flow_area(pm, a_thr).0;
+        Some(IntakeState::from([pm, pm, w, w, 0.0, 0.0]))
+    }
+
+    /// One segment of the discrete model (see the module docs), for a valid input.
+    fn step(&self, x: &IntakeState, u: &IntakeInput) -> IntakeState {
+        let p = &self.params;
+        let n_rpm = u[U_SPEED];
+        let dt = Self::segment_dt(n_rpm);
+        let substeps = (dt / p.max_substep_s).ceil().max(1.0);
+        let h = dt / substeps;
+        let substeps = substeps as usize;
+        let w = Self::pump_frequency(n_rpm);
+        let xi = p.pump_damping;
+        let e = oscillator_transition(w, xi, h);
+        // Exact contribution of q(substep start) to the MAP lag over a substep:
+        // g' = (1/tau) [1 0] (A + I/tau)^-1 (expm(A h) - exp(-h/tau) I).
+        let tau = p.map_time_constant_s;
+        let m22 = 1.0 / tau - 2.0 * xi * w;
+        let det = (1.0 / tau) * m22 + w * w;
+        let row = nalgebra::RowVector2::new(m22 / det, -1.0 / det) / tau;
+        let g = row * (e - Matrix2::identity() * (-h / tau).exp());
+
+        let (slope, ofs) = self.vol_eff(n_rpm);
+        let a_thr = self.throttle_area(u[U_THROTTLE]);
+        let a_egr = self.egr_area(u[U_EGR]);
+        let flows = |pm: f64| -> (f64, f64, f64) {
+            let (wt, dwt) = match self.flow {
+                ThrottleFlow::Nozzle => self.throttle_flow_area(pm, a_thr),
+                ThrottleFlow::RandomWalk => (x[X_WTHR], 0.0),
+            };
+            let (we, dwe) = self.egr_flow_area(pm, a_egr);
+            let f = self.gain * (wt + we - (slope * pm - ofs));
+            let j = self.gain * (dwt + dwe - slope);
+            (f, j, wt)
+        };
+
+        let mut pm = x[X_PM];
+        let mut pmes = x[X_PMES];
+        let mut wmes = x[X_WMES];
+        let mut q = Vector2::new(x[X_Q1], x[X_Q2]);
+        let (mut f, mut j, mut wt) = flows(pm);
+        for _ in 0..substeps {
+            let pm1 = pm + h * f * phi1(h * j);
+            let (f1, j1, wt1) = flows(pm1);
+            pmes = lag_foh(pmes, pm, pm1, h, tau) + (g * q)[0];
+            wmes = lag_foh(wmes, wt, wt1, h, p.maf_time_constant_s);
+            q = e * q;
+            (pm, f, j, wt) = (pm1, f1, j1, wt1);
+        }
+        IntakeState::from([pm, pmes, wt, wmes, q[0], q[1]])
+    }
+}
+
+impl TransitionModel<6, 3> for IntakeModel {
+    /// One crank segment, `dt = 30 / u[0]`. Returns `x` unchanged for an input
+    /// [`IntakeModel::check_input`] refuses on speed or finiteness (never NaN).
+    fn transition(&self, x: &IntakeState, u: &IntakeInput) -> IntakeState {
+        if !self.input_ok(u) || x.iter().any(|v| !v.is_finite()) {
+            return *x;
+        }
+        self.step(x, u)
+    }
+}
+
+/// MAP and MAF together: `y = [p_mes, W_mes]` (the centralized filter's `H`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct MapMafSensors;
+
+/// MAP only: `y = p_mes` (a decentralized local filter).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct MapSensor;
+
+/// MAF only: `y = W_mes` (a decentralized local filter).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct MafSensor;
+
+impl ObservationModel<6, 2, 3> for MapMafSensors {
+    #[inline]
+    fn observe(&self, x: &IntakeState, _u: &IntakeInput) -> Vector2<f64> {
+        Vector2::new(x[X_PMES], x[X_WMES])
+    }
+
+    fn observation_jacobian(&self, _x: &IntakeState, _u: &IntakeInput) -> SMatrix<f64, 2, 6> {
+        let mut h = SMatrix::<f64, 2, 6>::zeros();
+        h[(0, X_PMES)] = 1.0;
+        h[(1, X_WMES)] = 1.0;
+        h
+    }
+}
+
+impl ObservationModel<6, 1, 3> for MapSensor {
+    #[inline]
+    fn observe(&self, x: &IntakeState, _u: &IntakeInput) -> Vector1<f64> {
+        Vector1::new(x[X_PMES])
+    }
+
+    fn observation_jacobian(&self, _x: &IntakeState, _u: &IntakeInput) -> SMatrix<f64, 1, 6> {
+        let mut h = SMatrix::<f64, 1, 6>::zeros();
+        h[(0, X_PMES)] = 1.0;
+        h
+    }
+}
+
+impl ObservationModel<6, 1, 3> for MafSensor {
+    #[inline]
+    fn observe(&self, x: &IntakeState, _u: &IntakeInput) -> Vector1<f64> {
+        Vector1::new(x[X_WMES])
+    }
+
+    fn observation_jacobian(&self, _x: &IntakeState, _u: &IntakeInput) -> SMatrix<f64, 1, 6> {
+        let mut h = SMatrix::<f64, 1, 6>::zeros();
+        h[(0, X_WMES)] = 1.0;
+        h
+    }
+}
