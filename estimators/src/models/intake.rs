@@ -325,22 +325,66 @@ fn subsonic(psi: f64, k: f64) -> (f64, f64) {
 /// above `steep`) and its derivative `dPsi/dpsi`. Ratios below 0, NaN or above 1 are handled as
 /// described in the module docs (choked, choked, zero).
 pub fn flow_function(psi: f64, k: f64, steep: f64) -> (f64, f64) {
-    let crit = critical_ratio(k);
-    let psi = if psi.is_nan() { 0.0 } else { psi };
-    if psi < crit {
-        // (k (2/(k+1))^((k+1)/(k-1)))^(1/2), equal to the subsonic formula at psi_crit.
-        (
-            (k * (2.0 / (k + 1.0)).powf((k + 1.0) / (k - 1.0))).sqrt(),
-            0.0,
-        )
-    } else if psi < steep {
-        subsonic(psi, k)
-    } else if psi < 1.0 {
+    FlowConsts::new(k, steep).eval(psi)
+}
+
+/// The speed-independent constants of [`flow_function`], computed once per model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct FlowConsts {
+    k: f64,
+    steep: f64,
+    crit: f64,
+    choked: f64,
+    top: f64,
+    slope: f64,
+}
+
+impl FlowConsts {
+    fn new(k: f64, steep: f64) -> Self {
         let top = subsonic(steep, k).0;
-        let slope = -top / (1.0 - steep);
-        (top + slope * (psi - steep), slope)
-    } else {
-        (0.0, 0.0)
+        Self {
+            k,
+            steep,
+            crit: critical_ratio(k),
+            // (k (2/(k+1))^((k+1)/(k-1)))^(1/2), equal to the subsonic formula at psi_crit.
+            choked: (k * (2.0 / (k + 1.0)).powf((k + 1.0) / (k - 1.0))).sqrt(),
+            top,
+            slope: -top / (1.0 - steep),
+        }
+    }
+
+    #[inline]
+    fn eval(&self, psi: f64) -> (f64, f64) {
+        let psi = if psi.is_nan() { 0.0 } else { psi };
+        if psi < self.crit {
+            (self.choked, 0.0)
+        } else if psi < self.steep {
+            subsonic(psi, self.k)
+        } else if psi < 1.0 {
+            (self.top + self.slope * (psi - self.steep), self.slope)
+        } else {
+            (0.0, 0.0)
+        }
+    }
+
+    /// `d^2 Psi / dpsi^2`: non-zero only in the subsonic regime (the others are affine).
+    fn curvature(&self, psi: f64) -> f64 {
+        if psi.is_nan() || psi < self.crit || psi >= self.steep {
+            return 0.0;
+        }
+        let k = self.k;
+        let c = 2.0 * k / (k - 1.0);
+        let a = psi.powf(2.0 / k);
+        let b = psi.powf((k + 1.0) / k);
+        let val = (c * (a - b)).max(0.0).sqrt();
+        if !(val > 0.0) {
+            return 0.0;
+        }
+        let dinner = c * ((2.0 / k) * a - ((k + 1.0) / k) * b) / psi;
+        let d2inner =
+            c * ((2.0 / k) * (2.0 / k - 1.0) * a - ((k + 1.0) / k) * (1.0 / k) * b) / (psi * psi);
+        let der = 0.5 * dinner / val;
+        (0.5 * d2inner - der * der) / val
     }
 }
 
@@ -355,22 +399,6 @@ pub fn oscillator_transition(w: f64, xi: f64, t: f64) -> Matrix2<f64> {
     decay * Matrix2::new(c + sw * xi * w, sw, -sw * w * w, c - sw * xi * w)
 }
 
-/// Output after `h` of a first-order lag with time constant `tau` from `y`, for an input
-/// linear from `u0` to `u1` over the interval (exact).
-#[inline]
-fn lag_foh(y: f64, u0: f64, u1: f64, h: f64, tau: f64) -> f64 {
-    let r = h / tau;
-    let one_minus_a = -(-r).exp_m1();
-    let a = 1.0 - one_minus_a;
-    let ramp = if r < 1e-4 {
-        // 1 - (1 - e^-r)/r = r/2 - r^2/6 + ...
-        r / 2.0 - r * r / 6.0
-    } else {
-        1.0 - one_minus_a / r
-    };
-    a * y + one_minus_a * u0 + (u1 - u0) * ramp
-}
-
 /// `phi1(z) = (e^z - 1) / z`.
 #[inline]
 fn phi1(z: f64) -> f64 {
@@ -378,6 +406,16 @@ fn phi1(z: f64) -> f64 {
         1.0 + z / 2.0
     } else {
         z.exp_m1() / z
+    }
+}
+
+/// `phi1'(z) = (e^z - phi1(z)) / z`.
+#[inline]
+fn dphi1(z: f64) -> f64 {
+    if z.abs() < 1e-3 {
+        0.5 + z * (1.0 / 3.0 + z * (1.0 / 8.0 + z / 30.0))
+    } else {
+        (z.exp() - phi1(z)) / z
     }
 }
 
@@ -392,6 +430,8 @@ pub struct IntakeModel {
     thr_scale: f64,
     /// `p_egr / sqrt(R T_egr)`.
     egr_scale: f64,
+    /// Constants of the flow function.
+    nozzle: FlowConsts,
 }
 
 impl IntakeModel {
@@ -403,6 +443,7 @@ impl IntakeModel {
             gain: r * params.manifold_temperature_k / params.manifold_volume_m3,
             thr_scale: params.ambient_pressure_pa / (r * params.ambient_temperature_k).sqrt(),
             egr_scale: params.egr_upstream_pressure_pa / (r * params.egr_temperature_k).sqrt(),
+            nozzle: FlowConsts::new(params.heat_capacity_ratio, params.steep_ratio),
             params,
             flow,
         })
@@ -533,11 +574,7 @@ impl IntakeModel {
     /// Throttle flow (kg/s) and its derivative with respect to `p_m`, for an effective area.
     pub fn throttle_flow_area(&self, p_m: f64, area: f64) -> (f64, f64) {
         let p = &self.params;
-        let (f, d) = flow_function(
-            p_m / p.ambient_pressure_pa,
-            p.heat_capacity_ratio,
-            p.steep_ratio,
-        );
+        let (f, d) = self.nozzle.eval(p_m / p.ambient_pressure_pa);
         let s = self.thr_scale * area;
         (s * f, s * d / p.ambient_pressure_pa)
     }
@@ -551,11 +588,7 @@ impl IntakeModel {
     /// EGR flow (kg/s) and its derivative with respect to `p_m`, for an effective area.
     pub fn egr_flow_area(&self, p_m: f64, area: f64) -> (f64, f64) {
         let p = &self.params;
-        let (f, d) = flow_function(
-            p_m / p.egr_upstream_pressure_pa,
-            p.heat_capacity_ratio,
-            p.steep_ratio,
-        );
+        let (f, d) = self.nozzle.eval(p_m / p.egr_upstream_pressure_pa);
         let s = self.egr_scale * area;
         (s * f, s * d / p.egr_upstream_pressure_pa)
     }
@@ -672,6 +705,23 @@ impl IntakeModel {
 
     /// One segment of the discrete model (see the module docs), for a valid input.
     fn step(&self, x: &IntakeState, u: &IntakeInput) -> IntakeState {
+        self.run_segment::<false>(x, u).0
+    }
+
+    /// One segment and its exact Jacobian `d x+ / d x` (the derivative of the discrete map,
+    /// propagated alongside the substeps), for a valid input.
+    fn step_with_jacobian(&self, x: &IntakeState, u: &IntakeInput) -> (IntakeState, IntakeJac) {
+        self.run_segment::<true>(x, u)
+    }
+
+    /// The substep loop of [`Self::step`]; with `JAC` it also propagates the sensitivities of
+    /// `p_m`, `p_mes`, `W_mes` (and the oscillator) to the initial state. The state is computed
+    /// by the same operations either way, so both paths give bit-identical states.
+    fn run_segment<const JAC: bool>(
+        &self,
+        x: &IntakeState,
+        u: &IntakeInput,
+    ) -> (IntakeState, IntakeJac) {
         let p = &self.params;
         let n_rpm = u[U_SPEED];
         let dt = Self::segment_dt(n_rpm);
@@ -688,35 +738,162 @@ impl IntakeModel {
         let det = (1.0 / tau) * m22 + w * w;
         let row = nalgebra::RowVector2::new(m22 / det, -1.0 / det) / tau;
         let g = row * (e - Matrix2::identity() * (-h / tau).exp());
+        let map_lag = LagCoeffs::new(h, tau);
+        let maf_lag = LagCoeffs::new(h, p.maf_time_constant_s);
 
         let (slope, ofs) = self.vol_eff(n_rpm);
         let a_thr = self.throttle_area(u[U_THROTTLE]);
         let a_egr = self.egr_area(u[U_EGR]);
-        let flows = |pm: f64| -> (f64, f64, f64) {
-            let (wt, dwt) = match self.flow {
-                ThrottleFlow::Nozzle => self.throttle_flow_area(pm, a_thr),
-                ThrottleFlow::RandomWalk => (x[X_WTHR], 0.0),
+        let nozzle = self.flow == ThrottleFlow::Nozzle;
+        // Returns f = dp_m/dt, j = df/dp_m, the throttle flow and its derivative, and (only
+        // with JAC) dj/dp_m.
+        let flows = |pm: f64| -> (f64, f64, f64, f64, f64) {
+            let (wt, dwt) = if nozzle {
+                self.throttle_flow_area(pm, a_thr)
+            } else {
+                (x[X_WTHR], 0.0)
             };
-            let (we, dwe) = self.egr_flow_area(pm, a_egr);
+            // A closed EGR valve (area 0) gives exactly zero flow and slope.
+            let (we, dwe) = if a_egr == 0.0 {
+                (0.0, 0.0)
+            } else {
+                self.egr_flow_area(pm, a_egr)
+            };
             let f = self.gain * (wt + we - (slope * pm - ofs));
             let j = self.gain * (dwt + dwe - slope);
-            (f, j, wt)
+            let dj = if JAC {
+                let pa = p.ambient_pressure_pa;
+                let pe = p.egr_upstream_pressure_pa;
+                let d2t = if nozzle {
+                    self.thr_scale * a_thr * self.nozzle.curvature(pm / pa) / (pa * pa)
+                } else {
+                    0.0
+                };
+                let d2e = if a_egr == 0.0 {
+                    0.0
+                } else {
+                    self.egr_scale * a_egr * self.nozzle.curvature(pm / pe) / (pe * pe)
+                };
+                self.gain * (d2t + d2e)
+            } else {
+                0.0
+            };
+            (f, j, wt, dwt, dj)
         };
 
         let mut pm = x[X_PM];
         let mut pmes = x[X_PMES];
         let mut wmes = x[X_WMES];
         let mut q = Vector2::new(x[X_Q1], x[X_Q2]);
-        let (mut f, mut j, mut wt) = flows(pm);
+        let (mut f, mut j, mut wt, dwt0, mut dj) = flows(pm);
+        // Sensitivities (JAC only). `s_*` are d(.)/d[p_m0, W_thr0]; `pmes_*`, `wmes_*` the
+        // sensor outputs' derivatives; `qk` = e^k, the oscillator's transition so far.
+        let mut s_pm = [1.0, 0.0];
+        let mut s_wt = if nozzle { [dwt0, 0.0] } else { [0.0, 1.0] };
+        let (mut pmes_x, mut pmes_pmes) = ([0.0, 0.0], 1.0);
+        let mut pmes_q = nalgebra::RowVector2::new(0.0, 0.0);
+        let (mut wmes_x, mut wmes_wmes) = ([0.0, 0.0], 1.0);
+        let mut qk = Matrix2::identity();
+        // phi1 and phi1' of the last z: z = h j is the same in every substep wherever the flows
+        // are affine in p_m (choked or linear region, closed EGR, random-walk throttle).
+        let (mut z_last, mut ph, mut dph) = (f64::NAN, 0.0, 0.0);
         for _ in 0..substeps {
-            let pm1 = pm + h * f * phi1(h * j);
-            let (f1, j1, wt1) = flows(pm1);
-            pmes = lag_foh(pmes, pm, pm1, h, tau) + (g * q)[0];
-            wmes = lag_foh(wmes, wt, wt1, h, p.maf_time_constant_s);
+            let z = h * j;
+            if z != z_last {
+                z_last = z;
+                ph = phi1(z);
+                if JAC {
+                    dph = dphi1(z);
+                }
+            }
+            let pm1 = pm + h * f * ph;
+            let (f1, j1, wt1, dwt1, dj1) = flows(pm1);
+            if JAC {
+                // d pm1 = (1 + h j phi1 + h f phi1'(z) h dj) d pm + h phi1 df/dW dW.
+                let a = 1.0 + h * j * ph + h * f * dph * h * dj;
+                let b = if nozzle { 0.0 } else { h * ph * self.gain };
+                let s_pm1 = [a * s_pm[0], a * s_pm[1] + b];
+                let s_wt1 = if nozzle {
+                    [dwt1 * s_pm1[0], 0.0]
+                } else {
+                    [0.0, 1.0]
+                };
+                for c in 0..2 {
+                    pmes_x[c] =
+                        map_lag.a * pmes_x[c] + map_lag.b0 * s_pm[c] + map_lag.b1 * s_pm1[c];
+                    wmes_x[c] =
+                        maf_lag.a * wmes_x[c] + maf_lag.b0 * s_wt[c] + maf_lag.b1 * s_wt1[c];
+                }
+                pmes_pmes *= map_lag.a;
+                wmes_wmes *= maf_lag.a;
+                pmes_q = map_lag.a * pmes_q + g * qk;
+                qk = e * qk;
+                (s_pm, s_wt) = (s_pm1, s_wt1);
+            }
+            pmes = map_lag.apply(pmes, pm, pm1) + (g * q)[0];
+            wmes = maf_lag.apply(wmes, wt, wt1);
             q = e * q;
-            (pm, f, j, wt) = (pm1, f1, j1, wt1);
+            (pm, f, j, wt, dj) = (pm1, f1, j1, wt1, dj1);
         }
-        IntakeState::from([pm, pmes, wt, wmes, q[0], q[1]])
+        let next = IntakeState::from([pm, pmes, wt, wmes, q[0], q[1]]);
+        let mut jac = IntakeJac::zeros();
+        if JAC {
+            let cols = [X_PM, X_WTHR];
+            for c in 0..2 {
+                jac[(X_PM, cols[c])] = s_pm[c];
+                jac[(X_PMES, cols[c])] = pmes_x[c];
+                jac[(X_WTHR, cols[c])] = s_wt[c];
+                jac[(X_WMES, cols[c])] = wmes_x[c];
+            }
+            jac[(X_PMES, X_PMES)] = pmes_pmes;
+            jac[(X_PMES, X_Q1)] = pmes_q[0];
+            jac[(X_PMES, X_Q2)] = pmes_q[1];
+            jac[(X_WMES, X_WMES)] = wmes_wmes;
+            jac.fixed_view_mut::<2, 2>(X_Q1, X_Q1).copy_from(&qk);
+        }
+        (next, jac)
+    }
+}
+
+/// The 6 x 6 transition Jacobian.
+type IntakeJac = SMatrix<f64, 6, 6>;
+
+/// Output after a substep `h` of a first-order lag with time constant `tau`, for an input
+/// linear from `u0` to `u1` over the substep (exact), with the exponentials computed once per
+/// segment: `a y + (1 - a) u0 + ramp (u1 - u0)`, i.e. `a y + b0 u0 + b1 u1` with
+/// `b0 = 1 - a - ramp`, `b1 = ramp` (the derivative's weights).
+struct LagCoeffs {
+    a: f64,
+    one_minus_a: f64,
+    ramp: f64,
+    b0: f64,
+    b1: f64,
+}
+
+impl LagCoeffs {
+    fn new(h: f64, tau: f64) -> Self {
+        let r = h / tau;
+        let one_minus_a = -(-r).exp_m1();
+        let a = 1.0 - one_minus_a;
+        let ramp = if r < 1e-4 {
+            // 1 - (1 - e^-r)/r = r/2 - r^2/6 + ...
+            r / 2.0 - r * r / 6.0
+        } else {
+            1.0 - one_minus_a / r
+        };
+        Self {
+            a,
+            one_minus_a,
+            ramp,
+            b0: one_minus_a - ramp,
+            b1: ramp,
+        }
+    }
+
+    /// The lag's output after the substep.
+    #[inline]
+    fn apply(&self, y: f64, u0: f64, u1: f64) -> f64 {
+        self.a * y + self.one_minus_a * u0 + (u1 - u0) * self.ramp
     }
 }
 
@@ -728,6 +905,17 @@ impl TransitionModel<6, 3> for IntakeModel {
             return *x;
         }
         self.step(x, u)
+    }
+
+    /// The exact derivative of [`Self::transition`] (propagated through the substeps alongside
+    /// the state, with the flow function's second derivative for the exponential-Euler factor).
+    /// Not defined on the flow function's kinks (`psi_crit`, `steep_ratio`, 1), where the
+    /// one-sided value is returned. The identity where `transition` returns `x` unchanged.
+    fn transition_jacobian(&self, x: &IntakeState, u: &IntakeInput) -> IntakeJac {
+        if !self.input_ok(u) || x.iter().any(|v| !v.is_finite()) {
+            return IntakeJac::identity();
+        }
+        self.step_with_jacobian(x, u).1
     }
 }
 
