@@ -83,8 +83,7 @@ where
     /// Time update with input `u`: `x = f(x, u)`, `P = F P F' + Q`. On error nothing changes.
     pub fn predict(&mut self, u: &SVector<f64, U>) -> Result<(), FilterError> {
         check_input(u)?;
-        let f = self.transition.transition_jacobian(&self.x, u);
-        let mut x = self.transition.transition(&self.x, u);
+        let (mut x, f) = self.transition.transition_with_jacobian(&self.x, u);
         self.transition.constrain(&mut x);
         let mut p = f * self.p * f.transpose() + self.q;
         symmetrize(&mut p);

@@ -386,8 +386,7 @@ where
 
         // Common prediction from the master (steps 1 and 2: every local would compute the same
         // x_m- and, scaled by 1/beta_i, the same P_m-).
-        let f = self.transition.transition_jacobian(&self.x, u);
-        let mut xp = self.transition.transition(&self.x, u);
+        let (mut xp, f) = self.transition.transition_with_jacobian(&self.x, u);
         self.transition.constrain(&mut xp);
         let mut pp = f * self.p * f.transpose() + self.noise.q;
         symmetrize(&mut pp);

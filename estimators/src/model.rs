@@ -16,6 +16,17 @@ pub trait TransitionModel<const N: usize, const U: usize> {
         numerical_jacobian(|z| self.transition(z, u), x)
     }
 
+    /// The next state and `df/dx` together. Filters that need both (the EKF) call this, so a
+    /// model whose step is expensive (the intake model integrates substeps) can compute them in
+    /// one pass; the default calls the two methods.
+    fn transition_with_jacobian(
+        &self,
+        x: &SVector<f64, N>,
+        u: &SVector<f64, U>,
+    ) -> (SVector<f64, N>, SMatrix<f64, N, N>) {
+        (self.transition(x, u), self.transition_jacobian(x, u))
+    }
+
     /// Moves a state onto the set the plant can physically occupy (for example a throttle plate
     /// against its stop). Filters apply it to propagated sigma points and to posterior means.
     /// The default leaves the state as it is.

@@ -917,6 +917,18 @@ impl TransitionModel<6, 3> for IntakeModel {
         }
         self.step_with_jacobian(x, u).1
     }
+
+    /// One pass through the substeps for both (the EKF's predict).
+    fn transition_with_jacobian(
+        &self,
+        x: &IntakeState,
+        u: &IntakeInput,
+    ) -> (IntakeState, IntakeJac) {
+        if !self.input_ok(u) || x.iter().any(|v| !v.is_finite()) {
+            return (*x, IntakeJac::identity());
+        }
+        self.step_with_jacobian(x, u)
+    }
 }
 
 /// MAP and MAF together: `y = [p_mes, W_mes]` (the centralized filter's `H`).
