@@ -2,9 +2,6 @@
 //! memory) must not touch the heap in its steady state. A counting global allocator, armed per
 //! thread only around the scheduler's steps, proves it over ten seconds of 1 kHz data.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
 use fdd::config::ThrottleConfig;
 use fdd_estimators::models::throttle::ThrottleModel;
 use fdd_fixtures::scenario::Scenario;
@@ -14,33 +11,8 @@ use fdd_monitor::scheduler::Scheduler;
 use fdd_monitor::signal_table::{SignalSpec, SignalTable};
 use fdd_monitor::throttle::ThrottleMonitor;
 
-struct Counting;
-
-thread_local! {
-    static ARMED: Cell<bool> = const { Cell::new(false) };
-    static COUNT: Cell<usize> = const { Cell::new(0) };
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if ARMED.with(Cell::get) {
-            COUNT.with(|c| c.set(c.get() + 1));
-        }
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if ARMED.with(Cell::get) {
-            COUNT.with(|c| c.set(c.get() + 1));
-        }
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: fdd_testkit::CountingAllocator = fdd_testkit::CountingAllocator;
 
 #[test]
 fn throttle_monitor_steps_allocate_nothing() {
@@ -73,18 +45,22 @@ fn throttle_monitor_steps_allocate_nothing() {
     let plant = ThrottlePlant::from_default_config().expect("plant");
     let sc = Scenario::nominal_throttle("alloc", 10.0, 3);
     let mut counted_steps = 0;
+    let mut n = 0;
     for (k, f) in ThrottleSim::new(&sc, &plant).expect("sim").enumerate() {
         // The first second is warm-up: the tests complete for the first time (0x50 -> 0x00),
         // and those status changes are events, which may allocate.
-        let armed = k >= 1000;
-        ARMED.with(|a| a.set(armed));
-        counted_steps += u64::from(armed) * sched.run_until(f.t_ns, &table, &mut sink);
-        ARMED.with(|a| a.set(false));
+        if k >= 1000 {
+            let (steps, allocations) =
+                fdd_testkit::counted(|| sched.run_until(f.t_ns, &table, &mut sink));
+            counted_steps += steps;
+            n += allocations;
+        } else {
+            sched.run_until(f.t_ns, &table, &mut sink);
+        }
         table.set(ids[0], f.t_ns, f.motor_voltage_v).expect("u");
         table.set(ids[1], f.t_ns, f.tps_v).expect("tps");
         table.set(ids[2], f.t_ns, f.wattmeter_w).expect("wattmeter");
     }
-    let n = COUNT.with(Cell::get);
     assert!(counted_steps >= 8_999, "{counted_steps} steps counted");
     assert!(outputs > counted_steps, "the monitor reported its outputs");
     assert_eq!(
@@ -92,9 +68,6 @@ fn throttle_monitor_steps_allocate_nothing() {
         "{n} heap allocations in {counted_steps} monitor steps"
     );
     // The counter does count.
-    ARMED.with(|a| a.set(true));
-    let v = Box::new(8u8);
-    ARMED.with(|a| a.set(false));
-    assert_eq!(*v, 8);
-    assert_eq!(COUNT.with(Cell::get), 1);
+    let (v, n) = fdd_testkit::counted(|| Box::new(8u8));
+    assert_eq!((*v, n), (8, 1));
 }

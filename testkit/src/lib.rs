@@ -1,0 +1,74 @@
+//! Test support shared by fdd's crates (dev-dependency only).
+//!
+//! [`CountingAllocator`] is a global allocator that counts the heap allocations one thread
+//! makes while it is armed. fdd promises that a filter, detector or monitor step allocates
+//! nothing; tests prove it by installing the allocator in their test binary and measuring a
+//! section of code with [`allocations_in`]:
+//!
+//! ```ignore
+//! #[global_allocator]
+//! static GLOBAL: fdd_testkit::CountingAllocator = fdd_testkit::CountingAllocator;
+//!
+//! assert_eq!(fdd_testkit::allocations_in(|| filter.predict(&u).map(|_| ())), 0);
+//! ```
+//!
+//! Counting is per thread, so tests running in parallel do not see each other's allocations.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+/// Counts `alloc`, `alloc_zeroed` and `realloc` calls of the armed thread; delegates to the
+/// system allocator.
+pub struct CountingAllocator;
+
+thread_local! {
+    static ARMED: Cell<bool> = const { Cell::new(false) };
+    static COUNT: Cell<usize> = const { Cell::new(0) };
+}
+
+fn note_allocation() {
+    // `try_with`: the allocator may be called while this thread's locals are being torn down.
+    let _ = ARMED.try_with(|armed| {
+        if armed.get() {
+            let _ = COUNT.try_with(|c| c.set(c.get() + 1));
+        }
+    });
+}
+
+// SAFETY: every method forwards to `System` with the caller's arguments unchanged; the only
+// extra work is a thread-local counter update, which does not allocate.
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note_allocation();
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note_allocation();
+        unsafe { System.alloc_zeroed(layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note_allocation();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+/// Number of heap allocations this thread makes inside `f`. Meaningful only in a test binary
+/// whose global allocator is [`CountingAllocator`].
+pub fn allocations_in(f: impl FnOnce()) -> usize {
+    counted(f).1
+}
+
+/// Runs `f` armed and returns its result with the number of allocations it made.
+pub fn counted<R>(f: impl FnOnce() -> R) -> (R, usize) {
+    COUNT.with(|c| c.set(0));
+    ARMED.with(|a| a.set(true));
+    let r = f();
+    ARMED.with(|a| a.set(false));
+    (r, COUNT.with(Cell::get))
+}
