@@ -8,7 +8,7 @@ use anyhow::Result;
 use clap::{ArgAction, Parser, Subcommand};
 use fdd::config::ThrottleConfig;
 use fdd::replay::{ReplayOptions, RuntimeConfig};
-use fdd::reproduce::table2;
+use fdd::reproduce::{intake, table2};
 use tracing_subscriber::EnvFilter;
 
 #[derive(Parser)]
@@ -87,6 +87,20 @@ enum Reproduce {
         /// Throttle configuration file (default: the embedded config/throttle.toml).
         #[arg(long)]
         config: Option<PathBuf>,
+    },
+    /// The MAP/MAF EKF paper's Tables 1-2 with known truth: p_m and intake-valve flow RMSE of
+    /// the centralized, decentralized and federated EKFs and the raw sensors on a transient
+    /// drive, with each filter's cost per step.
+    Intake {
+        /// Length of the tip-in/tip-out drive (s).
+        #[arg(long, default_value_t = 120.0)]
+        duration: f64,
+        /// Seed of the profile, process and sensor noise.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// EGR command during tip-outs (0..1, 0 = no EGR).
+        #[arg(long, default_value_t = 0.3)]
+        egr: f64,
     },
 }
 
@@ -179,6 +193,20 @@ fn run(command: Command) -> Result<()> {
                 };
                 let report = table2::run(&cfg, &settings)?;
                 print!("{}", table2::render(&report));
+                Ok(())
+            }
+            Reproduce::Intake {
+                duration,
+                seed,
+                egr,
+            } => {
+                let settings = intake::IntakeSettings {
+                    duration_s: duration,
+                    seed,
+                    egr_pos: egr,
+                };
+                let report = intake::run(&settings)?;
+                print!("{}", intake::render(&report));
                 Ok(())
             }
         },
