@@ -25,6 +25,56 @@ fn invalid(origin: &str, message: impl Into<String>) -> ConfigError {
     }
 }
 
+/// The text of the file at `path`, or the embedded default, with the origin to name in errors.
+fn read_or_embedded(
+    path: Option<&Path>,
+    embedded: &'static str,
+    name: &str,
+) -> Result<(std::borrow::Cow<'static, str>, String), ConfigError> {
+    match path {
+        None => Ok((embedded.into(), format!("embedded {name}"))),
+        Some(p) => {
+            let origin = p.display().to_string();
+            let text = std::fs::read_to_string(p).map_err(|source| ConfigError::Read {
+                origin: origin.clone(),
+                source,
+            })?;
+            Ok((text.into(), origin))
+        }
+    }
+}
+
+/// The default intake configuration compiled into the binary.
+pub const DEFAULT_INTAKE_TOML: &str = include_str!("../config/intake.toml");
+
+/// `config/intake.toml`: the intake model's parameters and the intake monitor's settings.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IntakeConfig {
+    /// `[model]`: the intake manifold model (validated on load).
+    pub model: fdd_estimators::models::intake::IntakeParams,
+    /// `[monitor]`: the intake monitor (every key optional).
+    #[serde(default)]
+    pub monitor: fdd_monitor::intake::IntakeMonitorConfig,
+}
+
+impl IntakeConfig {
+    /// Parses and validates a configuration text; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &str) -> Result<Self, ConfigError> {
+        let cfg: Self = toml::from_str(text).map_err(|e| invalid(origin, e.to_string()))?;
+        cfg.model
+            .validate()
+            .map_err(|m| invalid(origin, format!("[model] {m}")))?;
+        Ok(cfg)
+    }
+
+    /// The embedded default (`None`) or a file.
+    pub fn load(path: Option<&Path>) -> Result<Self, ConfigError> {
+        let (text, origin) = read_or_embedded(path, DEFAULT_INTAKE_TOML, "config/intake.toml")?;
+        Self::parse(&text, &origin)
+    }
+}
+
 /// The default configuration compiled into the binary.
 pub const DEFAULT_THROTTLE_TOML: &str = include_str!("../config/throttle.toml");
 
@@ -114,16 +164,7 @@ impl ThrottleConfig {
 
     /// The embedded default, or the file at `path`.
     pub fn load(path: Option<&Path>) -> Result<Self, ConfigError> {
-        match path {
-            None => Self::parse(DEFAULT_THROTTLE_TOML, "embedded config/throttle.toml"),
-            Some(p) => {
-                let origin = p.display().to_string();
-                let text = std::fs::read_to_string(p).map_err(|source| ConfigError::Read {
-                    origin: origin.clone(),
-                    source,
-                })?;
-                Self::parse(&text, &origin)
-            }
-        }
+        let (text, origin) = read_or_embedded(path, DEFAULT_THROTTLE_TOML, "config/throttle.toml")?;
+        Self::parse(&text, &origin)
     }
 }

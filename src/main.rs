@@ -28,10 +28,12 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Simulate a scenario (truth, sensors, injected fault) and write it as an MCAP log.
+    /// Simulate a throttle or intake scenario (truth, sensors, injected fault) and write it as
+    /// an MCAP log, with the settings of the committed fixtures (same scenario, same bytes).
     Simulate {
-        /// Scenario: a path to a scenario TOML file, or the name of a file in fixtures/scenarios
-        /// (e.g. `throttle_tps_stuck`).
+        /// Scenario: a path to a scenario TOML file (its `monitor` key says throttle or intake),
+        /// or the name of a file in fixtures/scenarios (e.g. `throttle_tps_stuck`,
+        /// `intake_leak`).
         scenario: String,
         /// Output MCAP file.
         #[arg(short, long)]

@@ -1,10 +1,11 @@
-//! `fdd simulate`: scenario file -> truth simulation with sensors and an injected fault -> MCAP.
+//! `fdd simulate`: scenario file (throttle or intake) -> truth simulation with sensors and an
+//! injected fault -> MCAP.
 
 use std::path::{Path, PathBuf};
 
-use fdd_fixtures::scenario::{Scenario, ScenarioError};
-use fdd_fixtures::throttle_log::{write_log, LogStats, FIXTURE_WRITE_OPTIONS};
-use fdd_fixtures::throttle_sim::{PlantError, SimError, ThrottlePlant, ThrottleSim};
+use fdd_fixtures::scenario::ScenarioError;
+use fdd_fixtures::scenario_file::{AnyScenario, FixtureError};
+use fdd_fixtures::throttle_log::{LogStats, FIXTURE_WRITE_OPTIONS};
 use fdd_monitor::log::{LogError, LogWriter};
 
 /// Why a simulation could not be written.
@@ -19,28 +20,26 @@ pub enum SimulateError {
     #[error(transparent)]
     Scenario(#[from] ScenarioError),
     #[error(transparent)]
-    Plant(#[from] PlantError),
-    #[error(transparent)]
-    Sim(#[from] SimError),
+    Fixture(#[from] FixtureError),
     #[error(transparent)]
     Log(#[from] LogError),
 }
 
-/// Finds a scenario by path, or by name among the committed scenarios.
-pub fn find_scenario(arg: &str) -> Result<Scenario, SimulateError> {
+/// Finds a scenario (throttle or intake) by path, or by name among the committed scenarios.
+pub fn find_scenario(arg: &str) -> Result<AnyScenario, SimulateError> {
     let path = Path::new(arg);
     if path.is_file() {
-        return Ok(Scenario::load(path)?);
+        return Ok(AnyScenario::load(path)?);
     }
-    let dir = Scenario::committed_dir();
+    let dir = AnyScenario::committed_dir();
     let candidate: PathBuf = dir.join(format!("{arg}.toml"));
     if candidate.is_file() {
-        return Ok(Scenario::load(&candidate)?);
+        return Ok(AnyScenario::load(&candidate)?);
     }
-    let known = Scenario::load_dir(dir)
+    let known = AnyScenario::load_dir(dir)
         .map(|all| {
             all.iter()
-                .map(|s| s.name.clone())
+                .map(|s| s.name().to_string())
                 .collect::<Vec<_>>()
                 .join(", ")
         })
@@ -54,12 +53,11 @@ pub fn find_scenario(arg: &str) -> Result<Scenario, SimulateError> {
 
 /// Runs the scenario named or located by `scenario` and writes its log to `out` with the
 /// fixture writer settings (so `fdd simulate throttle_nominal -o x.mcap` reproduces
-/// `fixtures/data/throttle_nominal.mcap` byte for byte).
+/// `fixtures/data/throttle_nominal.mcap`, and `fdd simulate intake_leak -o x.mcap`
+/// `fixtures/data/intake_leak.mcap`, byte for byte).
 pub fn simulate(scenario: &str, out: &Path) -> Result<LogStats, SimulateError> {
     let sc = find_scenario(scenario)?;
-    let plant = ThrottlePlant::from_default_config()?;
-    let sim = ThrottleSim::new(&sc, &plant)?;
     let writer = LogWriter::create_with(out, FIXTURE_WRITE_OPTIONS)?;
-    let (_, stats) = write_log(sim, writer)?;
+    let (_, stats) = sc.write_log(writer)?;
     Ok(stats)
 }

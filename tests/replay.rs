@@ -446,10 +446,13 @@ fn remapped_config_replays_a_log_with_other_names() {
     }
     w.finish().expect("finish");
 
-    // With the default mapping nothing matches: every signal is missing.
+    // With the default mapping nothing matches: every monitor runs (a log with none of any
+    // monitor's topics is taken as mis-mapped) and every signal is missing.
     let s = run_lib(&log, &ReplayOptions::default());
-    assert_eq!(s.missing_signals().count(), 3);
-    assert_eq!(s.dtcs_raised().count(), 3);
+    let n = RuntimeConfig::load(None).expect("default").signals.len();
+    assert_eq!(n, 8, "3 throttle and 5 intake signals");
+    assert_eq!(s.missing_signals().count(), n);
+    assert_eq!(s.dtcs_raised().count(), n);
 
     let cfg_text = r#"
 [[signals]]

@@ -5,6 +5,7 @@
 //! - [`signal_table`]: latest value and timestamp per named signal, with staleness detection.
 //! - [`scheduler`] and [`monitor`]: monitors declare their inputs and rate and are stepped at it.
 
+pub mod intake;
 pub mod log;
 pub mod monitor;
 pub mod scheduler;

@@ -70,32 +70,34 @@ impl Default for StalenessConfig {
     }
 }
 
-fn default_truth_topic() -> String {
-    "/truth/throttle".into()
-}
-fn default_estimate() -> String {
-    "throttle_angle".into()
-}
-
-/// `[truth]`: the ground-truth topic of simulated logs.
+/// One `[[truth]]` entry: a ground-truth topic of simulated logs. Its messages carry the
+/// injected fault (`fault`, `fault_active`) and the true value of one quantity (`field`), which
+/// the summary compares with the monitor estimate named `estimate`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TruthConfig {
-    /// Topic of the `fdd.ThrottleTruth` messages.
-    #[serde(default = "default_truth_topic")]
+    /// Topic of the truth messages (`/truth/throttle`).
     pub topic: String,
-    /// Name of the monitor estimate compared with the true angle.
-    #[serde(default = "default_estimate")]
+    /// Field holding the true value (`angle_deg`).
+    pub field: String,
+    /// Name of the monitor estimate compared with it (`throttle_angle`).
     pub estimate: String,
 }
 
-impl Default for TruthConfig {
-    fn default() -> Self {
+/// The default truth topics: the throttle's and the intake manifold's.
+pub fn default_truths() -> Vec<TruthConfig> {
+    vec![
         TruthConfig {
-            topic: default_truth_topic(),
-            estimate: default_estimate(),
-        }
-    }
+            topic: "/truth/throttle".into(),
+            field: "angle_deg".into(),
+            estimate: "throttle_angle".into(),
+        },
+        TruthConfig {
+            topic: "/truth/intake".into(),
+            field: "p_m_pa".into(),
+            estimate: "manifold_pressure".into(),
+        },
+    ]
 }
 
 const fn default_max_gap_s() -> f64 {
@@ -130,6 +132,13 @@ pub struct MonitorsConfig {
     /// embedded default.
     #[serde(default)]
     pub throttle_config: Option<std::path::PathBuf>,
+    /// The intake-manifold monitor.
+    #[serde(default)]
+    pub intake: bool,
+    /// Intake model and monitor settings (a `config/intake.toml`-shaped file); absent: the
+    /// embedded default.
+    #[serde(default)]
+    pub intake_config: Option<std::path::PathBuf>,
 }
 
 impl MonitorsConfig {
@@ -138,6 +147,9 @@ impl MonitorsConfig {
         let mut v = Vec::new();
         if self.throttle {
             v.push("throttle");
+        }
+        if self.intake {
+            v.push("intake");
         }
         v
     }
@@ -151,8 +163,9 @@ pub struct RuntimeConfig {
     pub signals: Vec<SignalConfig>,
     #[serde(default)]
     pub staleness: StalenessConfig,
-    #[serde(default)]
-    pub truth: TruthConfig,
+    /// `[[truth]]` tables; absent: [`default_truths`].
+    #[serde(default = "default_truths")]
+    pub truth: Vec<TruthConfig>,
     #[serde(default)]
     pub replay: ReplayConfig,
     #[serde(default)]
@@ -263,11 +276,29 @@ impl RuntimeConfig {
             let key = rename_event_key(&e.field);
             invalid(o, &key, &e.value, &e.reason)
         })?;
-        if self.truth.topic.trim().is_empty() {
-            return Err(invalid(o, "truth.topic", "\"\"", "must not be empty"));
-        }
-        if self.truth.estimate.trim().is_empty() {
-            return Err(invalid(o, "truth.estimate", "\"\"", "must not be empty"));
+        for (i, t) in self.truth.iter().enumerate() {
+            for (key, v) in [
+                ("topic", &t.topic),
+                ("field", &t.field),
+                ("estimate", &t.estimate),
+            ] {
+                if v.trim().is_empty() {
+                    return Err(invalid(
+                        o,
+                        &format!("truth[{i}].{key}"),
+                        "\"\"",
+                        "must not be empty",
+                    ));
+                }
+            }
+            if self.truth[..i].iter().any(|u| u.topic == t.topic) {
+                return Err(invalid(
+                    o,
+                    &format!("truth[{i}].topic"),
+                    &t.topic,
+                    "is already a truth topic",
+                ));
+            }
         }
         let g = self.replay.max_gap_s;
         if !(g > 0.0 && g.is_finite()) {
@@ -356,13 +387,28 @@ mod tests {
     fn embedded_default_is_valid() {
         let cfg = RuntimeConfig::load(None).expect("embedded config");
         let names: Vec<_> = cfg.signals.iter().map(|s| s.name.as_str()).collect();
-        assert_eq!(names, ["motor_voltage", "tps", "wattmeter"]);
+        assert_eq!(
+            names,
+            [
+                "motor_voltage",
+                "tps",
+                "wattmeter",
+                "engine_speed",
+                "intake_throttle",
+                "egr_command",
+                "map",
+                "maf"
+            ]
+        );
         assert_eq!(cfg.staleness.debounce, DebounceConfig::MonitorInternal);
         assert!(cfg.monitors.throttle);
+        assert!(cfg.monitors.intake);
         assert_eq!(cfg.signal_specs()[1].max_age_ns, 5_000_000);
+        assert_eq!(cfg.signal_specs()[6].max_age_ns, 250_000_000);
+        assert_eq!(cfg.truth, default_truths());
         let mem = cfg.staleness_memory_config();
         assert_eq!(mem.events[1].name, "tps_no_signal");
-        assert_eq!(mem.validate().expect("valid").len(), 3);
+        assert_eq!(mem.validate().expect("valid").len(), 8);
     }
 
     #[test]

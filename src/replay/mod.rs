@@ -50,7 +50,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use fdd_monitor::log::{
-    ChannelInfo, LogError, LogMessage, LogReader, LogWriter, ReadMode, ThrottleTruth, WriteOptions,
+    ChannelInfo, LogError, LogMessage, LogReader, LogWriter, ReadMode, WriteOptions,
 };
 use fdd_monitor::monitor::{Monitor, OutputSink};
 use fdd_monitor::scheduler::Scheduler;
@@ -70,7 +70,9 @@ pub use summary::ReplaySummary;
 use config::s_to_ns;
 use problems::Problems;
 use sinks::Sinks;
-use summary::{ErrorStats, MonitorSummary, SignalSummary, TopicSummary, TruthSummary};
+use summary::{
+    ErrorStats, EstimateError, MonitorSummary, SignalSummary, TopicSummary, TruthSummary,
+};
 
 /// Why a replay could not run (or its outputs could not be written).
 #[derive(Debug, thiserror::Error)]
@@ -104,44 +106,75 @@ pub struct ReplayOptions {
 }
 
 /// The monitors the configuration asks for, reading `table`.
+///
+/// `log_has_topic` says whether the log carries a topic, when that is known before reading
+/// (an indexed file): a subsystem monitor none of whose input topics is in the log does not run
+/// (a throttle log replayed with the intake monitor enabled raises no intake "no signal"
+/// DTCs), and the staleness monitor does not watch its signals. Such monitors are returned in
+/// the second list with the reason. With `None`, or when the log carries no monitor's topics
+/// at all (a wrong mapping, rather than a log of another subsystem), every enabled monitor
+/// runs.
+#[allow(clippy::type_complexity)]
 pub fn build_monitors(
     cfg: &RuntimeConfig,
     table: &SignalTable,
-) -> Result<Vec<Box<dyn Monitor>>, ReplayError> {
-    let mut monitors: Vec<Box<dyn Monitor>> =
-        vec![Box::new(StalenessMonitor::from_config(cfg, table)?)];
+    log_has_topic: Option<&dyn Fn(&str) -> bool>,
+) -> Result<(Vec<Box<dyn Monitor>>, Vec<(String, String)>), ReplayError> {
+    let mut subsystems: Vec<Box<dyn Monitor>> = Vec::new();
     if cfg.monitors.throttle {
-        let throttle =
-            crate::config::ThrottleConfig::load(cfg.monitors.throttle_config.as_deref())?;
-        let model = fdd_estimators::models::throttle::ThrottleModel::new(throttle.model).map_err(
-            |message| ReplayError::Monitor {
-                monitor: "throttle".into(),
-                message,
-            },
-        )?;
-        let monitor = fdd_monitor::throttle::ThrottleMonitor::new(
-            model,
-            throttle.position_sensor.full_scale_v,
-            throttle.position_sensor.full_scale_deg,
-            &throttle.monitor,
-            table,
-        )
-        .map_err(|e| ReplayError::Monitor {
-            monitor: "throttle".into(),
-            message: e.to_string(),
-        })?;
-        tracing::info!(
-            config = cfg
-                .monitors
-                .throttle_config
-                .as_ref()
-                .map(|p| p.display().to_string())
-                .unwrap_or_else(|| "embedded config/throttle.toml".into()),
-            "throttle monitor started"
-        );
-        monitors.push(Box::new(monitor));
+        subsystems.push(Box::new(throttle_monitor(cfg, table)?));
     }
-
+    if cfg.monitors.intake {
+        subsystems.push(Box::new(intake_monitor(cfg, table)?));
+    }
+    let mut skipped = Vec::new();
+    let mut skip_signals = Vec::new();
+    let mut monitors: Vec<Box<dyn Monitor>> = Vec::new();
+    let present: Vec<bool> = subsystems
+        .iter()
+        .map(|m| match log_has_topic {
+            None => true,
+            Some(has) => m.inputs().iter().any(|&id| {
+                let name = &table.spec(id).name;
+                cfg.signals.iter().any(|s| s.name == *name && has(&s.topic))
+            }),
+        })
+        .collect();
+    // A log that carries no monitor's topics at all is more likely mapped wrongly than meant
+    // for none of them: then every monitor runs and reports its signals missing.
+    let none_present = !present.iter().any(|&p| p);
+    for (m, present) in subsystems.into_iter().zip(present) {
+        let names: Vec<String> = m
+            .inputs()
+            .iter()
+            .map(|&id| table.spec(id).name.clone())
+            .collect();
+        if present || none_present {
+            monitors.push(m);
+        } else {
+            let topics: Vec<&str> = cfg
+                .signals
+                .iter()
+                .filter(|s| names.contains(&s.name))
+                .map(|s| s.topic.as_str())
+                .collect();
+            skipped.push((
+                m.name().to_string(),
+                format!("the log has none of its topics ({})", topics.join(", ")),
+            ));
+            skip_signals.extend(names);
+        }
+    }
+    // A signal another running monitor reads stays watched.
+    skip_signals.retain(|n| {
+        !monitors
+            .iter()
+            .any(|m| m.inputs().iter().any(|&id| table.spec(id).name == *n))
+    });
+    monitors.insert(
+        0,
+        Box::new(StalenessMonitor::from_config(cfg, table, &skip_signals)?),
+    );
     for m in &monitors {
         if m.period_ns() == 0 {
             return Err(ReplayError::Monitor {
@@ -150,7 +183,66 @@ pub fn build_monitors(
             });
         }
     }
-    Ok(monitors)
+    Ok((monitors, skipped))
+}
+
+fn throttle_monitor(
+    cfg: &RuntimeConfig,
+    table: &SignalTable,
+) -> Result<fdd_monitor::throttle::ThrottleMonitor, ReplayError> {
+    let throttle = crate::config::ThrottleConfig::load(cfg.monitors.throttle_config.as_deref())?;
+    let err = |message: String| ReplayError::Monitor {
+        monitor: "throttle".into(),
+        message,
+    };
+    let model =
+        fdd_estimators::models::throttle::ThrottleModel::new(throttle.model).map_err(err)?;
+    let monitor = fdd_monitor::throttle::ThrottleMonitor::new(
+        model,
+        throttle.position_sensor.full_scale_v,
+        throttle.position_sensor.full_scale_deg,
+        &throttle.monitor,
+        table,
+    )
+    .map_err(|e| err(e.to_string()))?;
+    tracing::info!(
+        config = cfg
+            .monitors
+            .throttle_config
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_else(|| "embedded config/throttle.toml".into()),
+        "throttle monitor configured"
+    );
+    Ok(monitor)
+}
+
+fn intake_monitor(
+    cfg: &RuntimeConfig,
+    table: &SignalTable,
+) -> Result<fdd_monitor::intake::IntakeMonitor, ReplayError> {
+    let intake = crate::config::IntakeConfig::load(cfg.monitors.intake_config.as_deref())?;
+    let err = |message: String| ReplayError::Monitor {
+        monitor: "intake".into(),
+        message,
+    };
+    let model = fdd_estimators::models::intake::IntakeModel::new(
+        intake.model,
+        fdd_estimators::models::intake::ThrottleFlow::RandomWalk,
+    )
+    .map_err(err)?;
+    let monitor = fdd_monitor::intake::IntakeMonitor::new(&model, &intake.monitor, table)
+        .map_err(|e| err(e.to_string()))?;
+    tracing::info!(
+        config = cfg
+            .monitors
+            .intake_config
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_else(|| "embedded config/intake.toml".into()),
+        "intake monitor configured"
+    );
+    Ok(monitor)
 }
 
 type SharedMonitor = Rc<RefCell<Box<dyn Monitor>>>;
@@ -189,11 +281,10 @@ impl Monitor for Timed {
     }
 }
 
-/// A truth message, borrowed (no allocation).
+/// The fault fields every truth message carries, borrowed (no allocation). The true value is
+/// read separately from the configured field.
 #[derive(Deserialize)]
 struct TruthMsg<'a> {
-    #[serde(deserialize_with = "fdd_monitor::log::nan_as_null::deserialize")]
-    angle_deg: f64,
     #[serde(borrow)]
     fault: Cow<'a, str>,
     fault_active: bool,
@@ -205,7 +296,8 @@ struct Channel {
     messages: u64,
     /// Indices into `cfg.signals` of the signals this channel feeds.
     signals: Vec<usize>,
-    truth: bool,
+    /// Index into `cfg.truth` when this is a truth topic.
+    truth: Option<usize>,
 }
 
 #[derive(Default, Clone, Copy)]
@@ -341,21 +433,21 @@ impl Replayer<'_> {
             .filter(|(_, s)| *s.topic == *ch.topic)
             .map(|(i, _)| i)
             .collect();
-        let truth = *cfg.truth.topic == *ch.topic;
+        let truth = cfg.truth.iter().position(|t| *t.topic == *ch.topic);
         tracing::debug!(
             channel = ch.id,
             topic = %ch.topic,
             "channel {} {}: {}",
             ch.id,
             ch.topic,
-            if signals.is_empty() && !truth {
+            if signals.is_empty() && truth.is_none() {
                 "ignored (not mapped)".to_string()
             } else {
                 let mut v: Vec<String> = signals
                     .iter()
                     .map(|&i| format!("signal {}", cfg.signals[i].name))
                     .collect();
-                if truth {
+                if truth.is_some() {
                     v.push("ground truth".into());
                 }
                 v.join(", ")
@@ -429,28 +521,26 @@ impl Replayer<'_> {
                 }
             }
         }
-        if ch.truth {
+        if let Some(ti) = ch.truth {
             *truth_messages += 1;
             match serde_json::from_slice::<TruthMsg<'_>>(msg.data) {
                 Ok(tm) => {
-                    sinks.truth_angle = tm.angle_deg;
+                    // A null (NaN) or missing true value only disables the comparison.
+                    sinks.truths[ti].value = msg.field_f64(&cfg.truth[ti].field).unwrap_or(f64::NAN);
                     if tm.fault_active && !*truth_active {
                         sinks.fault_onset(&tm.fault, t);
                     }
                     *truth_active = tm.fault_active;
                 }
-                Err(_) => match msg.decode::<ThrottleTruth>() {
-                    Err(e) => problems.record_log_error(&e),
-                    Ok(_) => {
-                        problems.record(ProblemKind::WrongShape, Some(msg.topic), Some(t), || {
-                            format!(
-                                "{}: {} at {t} ns: unreadable ground-truth message",
-                                file.display(),
-                                msg.topic
-                            )
-                        })
-                    }
-                },
+                Err(e) => {
+                    problems.record(ProblemKind::WrongShape, Some(msg.topic), Some(t), || {
+                        format!(
+                            "{}: {} at {t} ns: unreadable ground-truth message (fields `fault`, `fault_active`): {e}",
+                            file.display(),
+                            msg.topic
+                        )
+                    })
+                }
             }
         }
     }
@@ -527,7 +617,35 @@ pub fn replay(
             })
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let monitors = build_monitors(cfg, &table)?;
+    let known_topics = (read_mode == ReadMode::Indexed).then(|| {
+        reader
+            .channels()
+            .map(|c| c.topic.to_string())
+            .collect::<Vec<String>>()
+    });
+    let has_topic = |t: &str| {
+        known_topics
+            .as_ref()
+            .is_some_and(|k| k.iter().any(|x| x == t))
+    };
+    let (monitors, skipped) = build_monitors(
+        cfg,
+        &table,
+        known_topics
+            .is_some()
+            .then_some(&has_topic as &dyn Fn(&str) -> bool),
+    )?;
+    // The staleness monitor (first) watches exactly the signals of the monitors that run.
+    let watched: Vec<SignalId> = monitors
+        .first()
+        .map(|m| m.inputs().to_vec())
+        .unwrap_or_default();
+    for (name, reason) in &skipped {
+        tracing::info!(
+            "monitor `{name}` does not run on {}: {reason}",
+            file.display()
+        );
+    }
     for m in &monitors {
         tracing::info!(
             monitor = m.name(),
@@ -578,7 +696,7 @@ pub fn replay(
         Some(p) => Some(LogWriter::create_with(p, WriteOptions::default())?),
     };
     let clock = Rc::new(Cell::new(0));
-    let sinks = Sinks::new(clock.clone(), events_file, out, cfg.truth.estimate.clone());
+    let sinks = Sinks::new(clock.clone(), events_file, out, &cfg.truth);
 
     let n_monitors = monitors.len();
     let mut r = Replayer {
@@ -667,6 +785,7 @@ pub fn replay(
                 last_sample_ns: r.table.get(id).map(|x| x.t_ns),
                 missing: r.table.missing(id),
                 stale_at_end: r.table.is_stale(id, last),
+                watched: watched.contains(&id),
             }
         })
         .collect();
@@ -683,7 +802,7 @@ pub fn replay(
                     .iter()
                     .map(|&i| format!("signal {} ({})", cfg.signals[i].name, cfg.signals[i].field))
                     .collect();
-                if c.truth {
+                if c.truth.is_some() {
                     v.push("ground truth".into());
                 }
                 if v.is_empty() {
@@ -713,11 +832,21 @@ pub fn replay(
     let truth = (r.truth_messages > 0).then(|| TruthSummary {
         messages: r.truth_messages,
         faults: r.sinks.onsets.clone(),
-        estimate: cfg.truth.estimate.clone(),
-        estimates: r.sinks.estimates,
-        switched_at_ns: r.sinks.switched_at_ns,
-        error_all: stats(&r.sinks.error_all),
-        error_after_switch: stats(&r.sinks.error_after_switch),
+        estimates: r
+            .sinks
+            .truths
+            .iter()
+            .filter(|t| t.estimates > 0 || !t.value.is_nan())
+            .map(|t| EstimateError {
+                estimate: t.estimate.clone(),
+                field: t.field.clone(),
+                estimates: t.estimates,
+                first_source: t.first_source.clone(),
+                switched_at_ns: t.switched_at_ns,
+                error_all: stats(&t.error_all),
+                error_after_switch: stats(&t.error_after_switch),
+            })
+            .collect(),
     });
     let summary = ReplaySummary {
         log: file,

@@ -34,6 +34,19 @@ struct PositionOut<'a> {
     source: &'a str,
 }
 
+/// `/fdd/intake/estimate`, borrowed.
+#[derive(Serialize)]
+struct IntakeEstimateOut<'a> {
+    name: &'a str,
+    #[serde(serialize_with = "nan_as_null::serialize")]
+    value: f64,
+    #[serde(serialize_with = "nan_as_null::serialize")]
+    lower: f64,
+    #[serde(serialize_with = "nan_as_null::serialize")]
+    upper: f64,
+    source: &'a str,
+}
+
 /// `/fdd/throttle/innovation`, borrowed.
 #[derive(Serialize)]
 struct InnovationOut<'a> {
@@ -70,6 +83,9 @@ struct DtcStatusOut {
 /// Output topics of `--out`.
 pub const POSITION_TOPIC: &str = "/fdd/throttle/position";
 pub const INNOVATION_TOPIC: &str = "/fdd/throttle/innovation";
+/// The intake monitor's estimates and innovations.
+pub const INTAKE_ESTIMATE_TOPIC: &str = "/fdd/intake/estimate";
+pub const INTAKE_INNOVATION_TOPIC: &str = "/fdd/intake/innovation";
 pub const TESTS_TOPIC: &str = "/fdd/tests";
 pub const DTC_STATUS_TOPIC: &str = "/fdd/dtc_status";
 pub const EVENTS_TOPIC: &str = "/fdd/events";
@@ -101,6 +117,26 @@ pub struct FaultOnset {
     pub detected: Option<(Dtc, String, f64)>,
 }
 
+/// The comparison of one estimate with its ground truth.
+#[derive(Debug, Clone, Default)]
+pub struct TruthTrack {
+    /// The estimate compared (`truth.estimate`).
+    pub estimate: String,
+    /// The truth field (`truth.field`).
+    pub field: String,
+    /// Latest true value (NaN before the first truth message).
+    pub value: f64,
+    /// Estimates of this name seen.
+    pub estimates: u64,
+    /// Source of the first estimate (`tps`), and the time the source first changed (a switch to
+    /// a fallback estimate), ns.
+    pub first_source: Option<String>,
+    pub switched_at_ns: Option<u64>,
+    /// Error over all estimates with a truth, and after the switch.
+    pub error_all: RunningStats,
+    pub error_after_switch: RunningStats,
+}
+
 /// The collectors and writers. Written to from inside monitor steps, so errors are kept in
 /// `error` and checked by the replay loop after each call.
 pub struct Sinks {
@@ -116,20 +152,10 @@ pub struct Sinks {
     pub events_written: u64,
     /// One record per event that changed status, in order of first change.
     pub dtcs: Vec<DtcRecord>,
-    /// The estimate compared with the truth (`truth.estimate`).
-    pub estimate_name: String,
-    /// Latest true angle (NaN before the first truth message), deg.
-    pub truth_angle: f64,
+    /// One comparison per `[[truth]]` entry, in configuration order.
+    pub truths: Vec<TruthTrack>,
     /// Faults seen active in the truth, in order of onset.
     pub onsets: Vec<FaultOnset>,
-    /// Estimate error over all estimates with a truth, and after the first switch away from
-    /// `tps`.
-    pub error_all: RunningStats,
-    pub error_after_switch: RunningStats,
-    /// Time of the first estimate whose source is not `tps`, ns.
-    pub switched_at_ns: Option<u64>,
-    /// Estimates of `estimate_name` seen.
-    pub estimates: u64,
     /// Outputs of kinds `--out` has no topic for (estimates of other names).
     pub unwritten: u64,
 }
@@ -139,7 +165,7 @@ impl Sinks {
         clock: Rc<Cell<u64>>,
         events_file: Option<(PathBuf, BufWriter<File>)>,
         out: Option<LogWriter<BufWriter<File>>>,
-        estimate_name: String,
+        truths: &[crate::replay::config::TruthConfig],
     ) -> Self {
         Sinks {
             clock,
@@ -149,13 +175,16 @@ impl Sinks {
             events: 0,
             events_written: 0,
             dtcs: Vec::new(),
-            estimate_name,
-            truth_angle: f64::NAN,
+            truths: truths
+                .iter()
+                .map(|t| TruthTrack {
+                    estimate: t.estimate.clone(),
+                    field: t.field.clone(),
+                    value: f64::NAN,
+                    ..TruthTrack::default()
+                })
+                .collect(),
             onsets: Vec::new(),
-            error_all: RunningStats::default(),
-            error_after_switch: RunningStats::default(),
-            switched_at_ns: None,
-            estimates: 0,
             unwritten: 0,
         }
     }
@@ -172,22 +201,36 @@ impl Sinks {
                 upper,
                 source,
             } => {
-                if name == self.estimate_name {
-                    self.estimates += 1;
-                    if self.switched_at_ns.is_none() && source != "tps" {
-                        self.switched_at_ns = Some(t_ns);
+                if let Some(tr) = self.truths.iter_mut().find(|t| t.estimate == name) {
+                    tr.estimates += 1;
+                    match &tr.first_source {
+                        None => tr.first_source = Some(source.to_string()),
+                        Some(first) if tr.switched_at_ns.is_none() && first != source => {
+                            tr.switched_at_ns = Some(t_ns);
+                        }
+                        Some(_) => {}
                     }
-                    let err = value - self.truth_angle;
+                    let err = value - tr.value;
                     if err.is_finite() {
-                        self.error_all.push(err);
-                        if self.switched_at_ns.is_some() {
-                            self.error_after_switch.push(err);
+                        tr.error_all.push(err);
+                        if tr.switched_at_ns.is_some() {
+                            tr.error_after_switch.push(err);
                         }
                     }
+                }
+                if name == "throttle_angle" {
                     self.write_out(POSITION_TOPIC, t_ns, || PositionOut {
                         angle_deg: value,
                         lower_deg: lower,
                         upper_deg: upper,
+                        source,
+                    });
+                } else if name == "manifold_pressure" || name == "intake_valve_flow" {
+                    self.write_out(INTAKE_ESTIMATE_TOPIC, t_ns, || IntakeEstimateOut {
+                        name,
+                        value,
+                        lower,
+                        upper,
                         source,
                     });
                 } else if self.out.is_some() {
@@ -200,13 +243,21 @@ impl Sinks {
                 variance,
                 nis,
                 dof,
-            } => self.write_out(INNOVATION_TOPIC, t_ns, || InnovationOut {
-                filter,
-                residual,
-                variance,
-                nis,
-                dof,
-            }),
+            } => self.write_out(
+                if filter.starts_with("intake_") {
+                    INTAKE_INNOVATION_TOPIC
+                } else {
+                    INNOVATION_TOPIC
+                },
+                t_ns,
+                || InnovationOut {
+                    filter,
+                    residual,
+                    variance,
+                    nis,
+                    dof,
+                },
+            ),
             Output::Test { test, result } => self.write_out(TESTS_TOPIC, t_ns, || TestOut {
                 test,
                 value: result.value,

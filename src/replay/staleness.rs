@@ -66,7 +66,13 @@ impl StalenessMonitor {
     pub const NAME: &'static str = "staleness";
 
     /// One event per configured signal, resolved against `table`.
-    pub fn from_config(cfg: &RuntimeConfig, table: &SignalTable) -> Result<Self, ReplayError> {
+    /// Watches every configured signal except those named in `skip` (the inputs of subsystem
+    /// monitors that do not run on this log).
+    pub fn from_config(
+        cfg: &RuntimeConfig,
+        table: &SignalTable,
+        skip: &[String],
+    ) -> Result<Self, ReplayError> {
         let memory =
             EventMemory::new(&cfg.staleness_memory_config()).map_err(|e| ReplayError::Monitor {
                 monitor: Self::NAME.into(),
@@ -74,6 +80,9 @@ impl StalenessMonitor {
             })?;
         let mut watched = Vec::with_capacity(cfg.signals.len());
         for (i, s) in cfg.signals.iter().enumerate() {
+            if skip.contains(&s.name) {
+                continue;
+            }
             let id = table.id(&s.name).ok_or_else(|| ReplayError::Monitor {
                 monitor: Self::NAME.into(),
                 message: format!("signal `{}` is not in the signal table", s.name),
@@ -274,7 +283,7 @@ mod tests {
     fn setup() -> (RuntimeConfig, SignalTable, StalenessMonitor) {
         let cfg = RuntimeConfig::load(None).expect("embedded");
         let table = cfg.signal_table().expect("table");
-        let m = StalenessMonitor::from_config(&cfg, &table).expect("monitor");
+        let m = StalenessMonitor::from_config(&cfg, &table, &[]).expect("monitor");
         (cfg, table, m)
     }
 

@@ -33,6 +33,8 @@ pub struct SignalSummary {
     pub missing: bool,
     /// The latest sample was older than max_age at the end of the log.
     pub stale_at_end: bool,
+    /// Watched for staleness: false for the inputs of a monitor that did not run on this log.
+    pub watched: bool,
 }
 
 /// A monitor that ran, or a note on one that did not.
@@ -58,11 +60,20 @@ pub struct TruthSummary {
     pub messages: u64,
     /// Faults active in the log, with onset and first DTC after it.
     pub faults: Vec<FaultOnset>,
-    /// The estimate compared (`truth.estimate`).
+    /// One comparison per truth topic of the configuration that had messages.
+    pub estimates: Vec<EstimateError>,
+}
+
+/// An estimate's error against the truth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EstimateError {
+    /// The estimate compared (`truth.estimate`) and the truth field (`truth.field`).
     pub estimate: String,
+    pub field: String,
     /// Estimates seen.
     pub estimates: u64,
-    /// First estimate whose source was not `tps`, ns.
+    /// The first estimate's source, and when the source first changed, ns.
+    pub first_source: Option<String>,
     pub switched_at_ns: Option<u64>,
     pub error_all: Option<ErrorStats>,
     pub error_after_switch: Option<ErrorStats>,
@@ -121,9 +132,9 @@ impl ReplaySummary {
             .find(|p| p.kind == kind && p.topic.as_deref() == Some(topic))
     }
 
-    /// Signals that never had a sample.
+    /// Watched signals that never had a sample.
     pub fn missing_signals(&self) -> impl Iterator<Item = &SignalSummary> {
-        self.signals.iter().filter(|s| s.missing)
+        self.signals.iter().filter(|s| s.missing && s.watched)
     }
 
     /// Events whose testFailed bit was set at least once.
@@ -244,7 +255,9 @@ impl ReplaySummary {
             "state",
         ]);
         for sg in &self.signals {
-            let state = if sg.missing {
+            let state = if !sg.watched {
+                "not used: its monitor does not run on this log".to_string()
+            } else if sg.missing {
                 "MISSING: no sample in the log".to_string()
             } else if sg.stale_at_end {
                 "stale at the end of the log".to_string()
@@ -331,25 +344,32 @@ impl ReplaySummary {
                 }
                 t.render(s)?;
             }
-            write!(s, "  estimate error ({} vs true angle, deg): ", tr.estimate)?;
-            match tr.error_all {
-                None => writeln!(s, "no estimates ({} seen)", tr.estimates)?,
-                Some(e) => {
-                    write!(
-                        s,
-                        "all {} samples mean {:.3} std {:.3}",
-                        e.samples, e.mean, e.std
-                    )?;
-                    match (tr.switched_at_ns, tr.error_after_switch) {
-                        (Some(at), Some(a)) => writeln!(
+            for e in &tr.estimates {
+                write!(
+                    s,
+                    "  estimate error ({} vs truth {}): ",
+                    e.estimate, e.field
+                )?;
+                match e.error_all {
+                    None => writeln!(s, "no estimates ({} seen)", e.estimates)?,
+                    Some(a) => {
+                        write!(
                             s,
-                            "; after the switch away from tps at {} s: {} samples mean {:.3} std {:.3}",
-                            secs(at),
-                            a.samples,
-                            a.mean,
-                            a.std
-                        )?,
-                        _ => writeln!(s, "; source never switched away from tps")?,
+                            "all {} samples mean {:.3} std {:.3}",
+                            a.samples, a.mean, a.std
+                        )?;
+                        let from = e.first_source.as_deref().unwrap_or("?");
+                        match (e.switched_at_ns, e.error_after_switch) {
+                            (Some(at), Some(b)) => writeln!(
+                                s,
+                                "; after the switch away from {from} at {} s: {} samples mean {:.3} std {:.3}",
+                                secs(at),
+                                b.samples,
+                                b.mean,
+                                b.std
+                            )?,
+                            _ => writeln!(s, "; source never switched away from {from}")?,
+                        }
                     }
                 }
             }

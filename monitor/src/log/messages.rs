@@ -1,8 +1,11 @@
 //! The message types fdd reads and writes, one per topic, and the serde helpers that write a
 //! non-finite `f64` as JSON `null` and read `null` back as NaN.
 //!
-//! Units are in the field names (`_v` volts, `_w` watts, `_a` amperes, `_deg` degrees) and in
-//! the doc comments; the [module documentation](super) has the table of every topic and field.
+//! Units are in the field names (`_v` volts, `_w` watts, `_a` amperes, `_deg` degrees, `_pa`
+//! pascals, `_kg_s` kg/s, `_rpm` rev/min) and in the doc comments; the
+//! [module documentation](super) has the table of the throttle and fdd topics. The intake
+//! topics (`/intake/*`, `/truth/intake`: [`EngineSpeed`] .. [`IntakeTruth`]) are listed in
+//! [`INTAKE_TOPICS`](super::schema::INTAKE_TOPICS).
 
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -64,6 +67,82 @@ pub struct ThrottleTruth {
     pub fault: String,
     /// Whether the fault is active at this sample.
     pub fault_active: bool,
+}
+
+/// `/intake/engine_speed`: engine speed over one 180 deg crank segment (the intake model's
+/// input `N`). The intake model is discretized per segment, so the speed is the one an ECU
+/// computes from the segment time, not an instantaneous value.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct EngineSpeed {
+    /// Engine speed, rpm: `30 / T` for a segment of `T` seconds. `null` when not finite.
+    #[serde(with = "nan_as_null")]
+    pub speed_rpm: f64,
+}
+
+/// `/intake/throttle`: throttle opening over one crank segment (the intake model's input
+/// `theta`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ThrottleAngle {
+    /// Throttle opening from the closed plate, deg. `null` when not finite.
+    #[serde(with = "nan_as_null")]
+    pub angle_deg: f64,
+}
+
+/// `/intake/egr_command`: the commanded EGR valve position over one crank segment (the intake
+/// model's input `e`). The command, not the valve: a stuck valve differs from it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct EgrCommand {
+    /// Commanded position, 0 closed .. 1 fully open (dimensionless). `null` when not finite.
+    #[serde(with = "nan_as_null")]
+    pub position: f64,
+}
+
+/// `/intake/map`: the manifold absolute pressure sensor reading.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ManifoldPressure {
+    /// Manifold absolute pressure, Pa. `null` when not finite.
+    #[serde(with = "nan_as_null")]
+    pub pressure_pa: f64,
+}
+
+/// `/intake/maf`: the mass air flow sensor reading (metered air upstream of the throttle; a
+/// manifold leak bypasses it).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MassAirFlow {
+    /// Air mass flow, kg/s. `null` when not finite.
+    #[serde(with = "nan_as_null")]
+    pub flow_kg_s: f64,
+}
+
+/// `/truth/intake`: the simulated intake-manifold truth, written by fixtures only.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IntakeTruth {
+    /// True manifold pressure, Pa.
+    #[serde(with = "nan_as_null")]
+    pub p_m_pa: f64,
+    /// True throttle (metered) air flow, kg/s.
+    #[serde(with = "nan_as_null")]
+    pub w_thr_kg_s: f64,
+    /// True EGR flow at the actual valve position, kg/s.
+    #[serde(with = "nan_as_null")]
+    pub w_egr_kg_s: f64,
+    /// True intake-valve (engine) flow, kg/s.
+    #[serde(with = "nan_as_null")]
+    pub w_inv_kg_s: f64,
+    /// True unmetered leak flow into the manifold, kg/s (0 without a leak).
+    #[serde(with = "nan_as_null")]
+    pub w_leak_kg_s: f64,
+    /// Actual EGR valve position, 0..1 (differs from the command under an EGR fault).
+    #[serde(with = "nan_as_null")]
+    pub egr_actual: f64,
+    /// The fault present at this sample: the scenario's fault name (e.g. `"map_bias"`,
+    /// `"leak"`) once active, `"none"` before (as in [`ThrottleTruth`]).
+    pub fault: String,
+    /// Whether the fault is active at this sample.
+    pub fault_active: bool,
+    /// Whether the fault is active and has an effect at this sample: a detector can only be
+    /// expected to see it then (an EGR valve stuck where it is commanded has no effect).
+    pub fault_observable: bool,
 }
 
 /// `/fdd/throttle/position`: fdd's throttle position output.
@@ -144,6 +223,24 @@ impl TopicMessage for Wattmeter {
 }
 impl TopicMessage for ThrottleTruth {
     const SCHEMA: &'static TopicSchema = &schema::THROTTLE_TRUTH;
+}
+impl TopicMessage for EngineSpeed {
+    const SCHEMA: &'static TopicSchema = &schema::ENGINE_SPEED;
+}
+impl TopicMessage for ThrottleAngle {
+    const SCHEMA: &'static TopicSchema = &schema::THROTTLE_ANGLE;
+}
+impl TopicMessage for EgrCommand {
+    const SCHEMA: &'static TopicSchema = &schema::EGR_COMMAND;
+}
+impl TopicMessage for ManifoldPressure {
+    const SCHEMA: &'static TopicSchema = &schema::MANIFOLD_PRESSURE;
+}
+impl TopicMessage for MassAirFlow {
+    const SCHEMA: &'static TopicSchema = &schema::MASS_AIR_FLOW;
+}
+impl TopicMessage for IntakeTruth {
+    const SCHEMA: &'static TopicSchema = &schema::INTAKE_TRUTH;
 }
 impl TopicMessage for PositionEstimate {
     const SCHEMA: &'static TopicSchema = &schema::POSITION_ESTIMATE;
@@ -253,5 +350,11 @@ mod tests {
         assert_eq!(TestStatistic::TOPIC, "/fdd/tests");
         assert_eq!(DtcStatusMsg::TOPIC, "/fdd/dtc_status");
         assert_eq!(DiagnosticEvent::TOPIC, "/fdd/events");
+        assert_eq!(EngineSpeed::TOPIC, "/intake/engine_speed");
+        assert_eq!(ThrottleAngle::TOPIC, "/intake/throttle");
+        assert_eq!(EgrCommand::TOPIC, "/intake/egr_command");
+        assert_eq!(ManifoldPressure::TOPIC, "/intake/map");
+        assert_eq!(MassAirFlow::TOPIC, "/intake/maf");
+        assert_eq!(IntakeTruth::TOPIC, "/truth/intake");
     }
 }

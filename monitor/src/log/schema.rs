@@ -103,6 +103,128 @@ pub const THROTTLE_TRUTH: TopicSchema = TopicSchema {
 "#,
 };
 
+/// `/intake/engine_speed`.
+pub const ENGINE_SPEED: TopicSchema = TopicSchema {
+    topic: "/intake/engine_speed",
+    schema_name: "fdd.EngineSpeed",
+    description: "engine speed from the 180 deg crank segment time",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.EngineSpeed",
+  "description": "Engine speed over one 180 deg crank segment (30 / segment time), the intake model's input N. Log time = end of the segment, ns.",
+  "type": "object",
+  "properties": {
+    "speed_rpm": {"type": ["number", "null"], "description": "engine speed, rpm (30 / segment time in s); null when not finite"}
+  },
+  "required": ["speed_rpm"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/intake/throttle`.
+pub const THROTTLE_ANGLE: TopicSchema = TopicSchema {
+    topic: "/intake/throttle",
+    schema_name: "fdd.ThrottleAngle",
+    description: "throttle opening over the crank segment (intake model input)",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.ThrottleAngle",
+  "description": "Throttle opening over one crank segment, the intake model's input theta. Log time = end of the segment, ns.",
+  "type": "object",
+  "properties": {
+    "angle_deg": {"type": ["number", "null"], "description": "throttle opening from the closed plate, deg; null when not finite"}
+  },
+  "required": ["angle_deg"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/intake/egr_command`.
+pub const EGR_COMMAND: TopicSchema = TopicSchema {
+    topic: "/intake/egr_command",
+    schema_name: "fdd.EgrCommand",
+    description: "commanded EGR valve position over the crank segment (intake model input)",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.EgrCommand",
+  "description": "Commanded EGR valve position over one crank segment, the intake model's input e. Log time = end of the segment, ns.",
+  "type": "object",
+  "properties": {
+    "position": {"type": ["number", "null"], "description": "commanded EGR valve position, 0 closed .. 1 fully open (dimensionless); null when not finite"}
+  },
+  "required": ["position"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/intake/map`.
+pub const MANIFOLD_PRESSURE: TopicSchema = TopicSchema {
+    topic: "/intake/map",
+    schema_name: "fdd.ManifoldPressure",
+    description: "manifold absolute pressure (MAP) sensor reading",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.ManifoldPressure",
+  "description": "Manifold absolute pressure sensor reading, sampled at the end of a crank segment. Log time = sample time, ns.",
+  "type": "object",
+  "properties": {
+    "pressure_pa": {"type": ["number", "null"], "description": "manifold absolute pressure, Pa; null when not finite"}
+  },
+  "required": ["pressure_pa"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/intake/maf`.
+pub const MASS_AIR_FLOW: TopicSchema = TopicSchema {
+    topic: "/intake/maf",
+    schema_name: "fdd.MassAirFlow",
+    description: "mass air flow (MAF) sensor reading: metered air through the throttle",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.MassAirFlow",
+  "description": "Mass air flow sensor reading (metered air upstream of the throttle), sampled at the end of a crank segment. Log time = sample time, ns.",
+  "type": "object",
+  "properties": {
+    "flow_kg_s": {"type": ["number", "null"], "description": "air mass flow, kg/s; null when not finite"}
+  },
+  "required": ["flow_kg_s"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/truth/intake`.
+pub const INTAKE_TRUTH: TopicSchema = TopicSchema {
+    topic: "/truth/intake",
+    schema_name: "fdd.IntakeTruth",
+    description: "simulated intake truth (fixtures only): pressure, flows, EGR position, fault",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.IntakeTruth",
+  "description": "Simulated intake-manifold truth at the end of a crank segment, written by fixtures only. Log time = sample time, ns.",
+  "type": "object",
+  "properties": {
+    "p_m_pa": {"type": ["number", "null"], "description": "true manifold pressure, Pa"},
+    "w_thr_kg_s": {"type": ["number", "null"], "description": "true throttle (metered) air flow, kg/s"},
+    "w_egr_kg_s": {"type": ["number", "null"], "description": "true EGR flow at the actual valve position, kg/s"},
+    "w_inv_kg_s": {"type": ["number", "null"], "description": "true intake-valve (engine) flow, kg/s"},
+    "w_leak_kg_s": {"type": ["number", "null"], "description": "true unmetered leak flow into the manifold, kg/s (0 without a leak)"},
+    "egr_actual": {"type": ["number", "null"], "description": "actual EGR valve position, 0..1 (differs from the command under an EGR fault)"},
+    "fault": {"type": "string", "description": "the fault present at this sample: the scenario fault name (e.g. map_bias, leak) once active, none before"},
+    "fault_active": {"type": "boolean", "description": "whether the fault is active at this sample"},
+    "fault_observable": {"type": "boolean", "description": "whether the fault is active and has an effect at this sample (an EGR valve stuck where it is commanded has none)"}
+  },
+  "required": ["p_m_pa", "w_thr_kg_s", "w_egr_kg_s", "w_inv_kg_s", "w_leak_kg_s", "egr_actual", "fault", "fault_active", "fault_observable"],
+  "additionalProperties": false
+}
+"#,
+};
+
 /// `/fdd/throttle/position`.
 pub const POSITION_ESTIMATE: TopicSchema = TopicSchema {
     topic: "/fdd/throttle/position",
@@ -277,9 +399,76 @@ pub const TOPICS: [&TopicSchema; 9] = [
     &DIAGNOSTIC_EVENT,
 ];
 
-/// The built-in topic named `topic`, if any.
+/// The intake-manifold topics, inputs first and truth last: built in like [`TOPICS`] (the
+/// writer needs no registration for them), kept in their own list so that code iterating
+/// [`TOPICS`] (the throttle and fdd output topics) sees the same list as before.
+pub const INTAKE_TOPICS: [&TopicSchema; 6] = [
+    &ENGINE_SPEED,
+    &THROTTLE_ANGLE,
+    &EGR_COMMAND,
+    &MANIFOLD_PRESSURE,
+    &MASS_AIR_FLOW,
+    &INTAKE_TRUTH,
+];
+
+/// `/fdd/intake/estimate`.
+pub const INTAKE_ESTIMATE: TopicSchema = TopicSchema {
+    topic: "/fdd/intake/estimate",
+    schema_name: "fdd.IntakeEstimate",
+    description: "intake monitor outputs (manifold pressure, intake-valve flow) with 95% intervals",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.IntakeEstimate",
+  "description": "One estimate of the intake monitor's primary filter, per crank segment. Log time = segment end, ns.",
+  "type": "object",
+  "properties": {
+    "name": {"type": "string", "description": "manifold_pressure (Pa) or intake_valve_flow (kg/s)"},
+    "value": {"type": ["number", "null"], "description": "the estimate, in the unit of its name"},
+    "lower": {"type": ["number", "null"], "description": "lower end of the 95% interval"},
+    "upper": {"type": ["number", "null"], "description": "upper end of the 95% interval"},
+    "source": {"type": "string", "description": "the filter: centralized_ekf, decentralized_ekf or federated_ekf"}
+  },
+  "required": ["name", "value", "lower", "upper", "source"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// `/fdd/intake/innovation`.
+pub const INTAKE_INNOVATION: TopicSchema = TopicSchema {
+    topic: "/fdd/intake/innovation",
+    schema_name: "fdd.IntakeInnovation",
+    description: "per-filter innovation of the intake filters, its variance and NIS",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.IntakeInnovation",
+  "description": "One intake filter's innovation after a segment's update. Log time = segment end, ns.",
+  "type": "object",
+  "properties": {
+    "filter": {"type": "string", "description": "intake_centralized, intake_local_map, intake_local_maf or intake_federated"},
+    "residual": {"type": "array", "items": {"type": ["number", "null"]}, "description": "innovation per measurement component: MAP in Pa, MAF in kg/s"},
+    "variance": {"type": "array", "items": {"type": ["number", "null"]}, "description": "innovation variance per component, Pa^2 or kg^2/s^2"},
+    "nis": {"type": ["number", "null"], "description": "normalized innovation squared, dimensionless"},
+    "dof": {"type": "integer", "minimum": 0, "maximum": 4294967295, "description": "degrees of freedom of nis"}
+  },
+  "required": ["filter", "residual", "variance", "nis", "dof"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// The intake monitor's output topics (written by `fdd replay --out`).
+pub const INTAKE_OUTPUT_TOPICS: [&TopicSchema; 2] = [&INTAKE_ESTIMATE, &INTAKE_INNOVATION];
+
+/// The built-in topic named `topic` ([`TOPICS`], [`INTAKE_TOPICS`] or
+/// [`INTAKE_OUTPUT_TOPICS`]), if any.
 pub fn builtin_topic(topic: &str) -> Option<&'static TopicSchema> {
-    TOPICS.iter().copied().find(|t| t.topic == topic)
+    TOPICS
+        .iter()
+        .chain(INTAKE_TOPICS.iter())
+        .chain(INTAKE_OUTPUT_TOPICS.iter())
+        .copied()
+        .find(|t| t.topic == topic)
 }
 
 #[cfg(test)]
@@ -333,6 +522,24 @@ mod tests {
             fault: "none".into(),
             fault_active: false,
         });
+        check(&EngineSpeed { speed_rpm: 800.0 });
+        check(&ThrottleAngle { angle_deg: 3.0 });
+        check(&EgrCommand { position: 0.3 });
+        check(&ManifoldPressure {
+            pressure_pa: 35_000.0,
+        });
+        check(&MassAirFlow { flow_kg_s: 0.004 });
+        check(&IntakeTruth {
+            p_m_pa: 35_000.0,
+            w_thr_kg_s: 0.004,
+            w_egr_kg_s: 0.0,
+            w_inv_kg_s: 0.004,
+            w_leak_kg_s: 0.0,
+            egr_actual: 0.0,
+            fault: "none".into(),
+            fault_active: false,
+            fault_observable: false,
+        });
         check(&PositionEstimate {
             angle_deg: 1.0,
             lower_deg: 0.5,
@@ -372,9 +579,15 @@ mod tests {
 
     #[test]
     fn topics_are_unique_and_found() {
-        for (i, a) in TOPICS.iter().enumerate() {
+        let all: Vec<&TopicSchema> = TOPICS
+            .iter()
+            .chain(INTAKE_TOPICS.iter())
+            .chain(INTAKE_OUTPUT_TOPICS.iter())
+            .copied()
+            .collect();
+        for (i, a) in all.iter().enumerate() {
             assert_eq!(builtin_topic(a.topic), Some(*a));
-            for b in &TOPICS[i + 1..] {
+            for b in &all[i + 1..] {
                 assert_ne!(a.topic, b.topic);
                 assert_ne!(a.schema_name, b.schema_name);
             }

@@ -1,0 +1,401 @@
+//! Fault isolation for the intake monitor: a bank of single-fault hypotheses fitted by least
+//! squares to the residuals since the estimated fault onset (a generalized likelihood ratio
+//! test with an unknown fault size and a known onset).
+//!
+//! Two residual channels per crank segment, both normalized by their predicted standard
+//! deviation:
+//!
+//! - **pressure** `z_p = (MAP - MAP predicted by the MAF-only local filter) / sqrt(S_p)`. The
+//!   MAF-local filter never sees the MAP: its manifold pressure is the model driven by the
+//!   metered air. Any unmetered or mis-metered air makes the true pressure drift away from it
+//!   along the manifold's own dynamics, and a MAP sensor error shows directly;
+//! - **throttle flow** `z_w = (MAF - throttle nozzle flow at the commanded opening) /
+//!   sqrt(S_w)`, only in segments where the throttle is choked (its flow then depends on the
+//!   opening alone): sensitive to the MAF sensor only.
+//!
+//! How each fault moves them (`delta` = the pressure error's response through the linearized
+//! manifold dynamics, `d delta/dt = j delta + R T / V u`, discretized per segment as
+//! `delta+ = e^{j dt} delta + R T / V dt phi1(j dt) u`, started at 0 at the onset):
+//!
+//! | hypothesis | parameter | `z_p * sqrt(S_p)` | `z_w * sqrt(S_w)` |
+//! |---|---|---|---|
+//! | MAP sensor bias | `b` (Pa) | `b` (immediately, no dynamics) | 0 |
+//! | MAF sensor gain | `g - 1` | `delta` of `u = -MAF` (the filter's air is `g` times too much) | `(g - 1) MAF` |
+//! | EGR valve stuck at `s` | `s` in `[0, 1]` | `delta` of `u = W_egr1 (s - e_cmd)` | 0 |
+//! | leak | area `A >= 0` (m^2) | `delta` of `u = W_orifice1 A` | 0 |
+//!
+//! with `W_egr1` the EGR flow of a fully open valve and `W_orifice1` the flow of a unit-area
+//! hole from ambient, both at the current manifold pressure. The statistic of hypothesis `i` is
+//! the drop in the sum of squared normalized residuals its best-fitting parameter achieves,
+//! `T_i = sum z^2 - min_theta sum (z - theta g_i)^2` (twice the log-likelihood ratio against
+//! "no fault" for white unit-variance residuals); the hypotheses are ranked by `T_i`. The EGR
+//! hypothesis is affine in `s` (`z = s g_1 - g_2`), so its "no fault" point is `s = e_cmd`,
+//! which it only matches while the command is steady.
+//!
+//! Everything here is pure arithmetic on fixed-size state: no allocation, no I/O.
+
+/// The faults the bank tells apart.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IntakeFault {
+    /// MAP sensor range/performance (bias).
+    MapSensor,
+    /// MAF sensor range/performance (gain).
+    MafSensor,
+    /// EGR valve stuck (insufficient or excessive flow).
+    EgrValve,
+    /// Unmetered air leaking into the manifold.
+    Leak,
+}
+
+/// Number of hypotheses.
+pub const HYPOTHESES: usize = 4;
+
+/// The hypotheses in bank order.
+pub const ALL_FAULTS: [IntakeFault; HYPOTHESES] = [
+    IntakeFault::MapSensor,
+    IntakeFault::MafSensor,
+    IntakeFault::EgrValve,
+    IntakeFault::Leak,
+];
+
+impl IntakeFault {
+    /// Candidate name in events.
+    pub fn name(self) -> &'static str {
+        match self {
+            IntakeFault::MapSensor => "map_sensor",
+            IntakeFault::MafSensor => "maf_sensor",
+            IntakeFault::EgrValve => "egr_valve",
+            IntakeFault::Leak => "manifold_leak",
+        }
+    }
+
+    fn index(self) -> usize {
+        match self {
+            IntakeFault::MapSensor => 0,
+            IntakeFault::MafSensor => 1,
+            IntakeFault::EgrValve => 2,
+            IntakeFault::Leak => 3,
+        }
+    }
+}
+
+/// What the bank needs of one segment.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SegmentRecord {
+    /// Normalized pressure residual (-), NaN when the segment has none.
+    pub z_p: f64,
+    /// Its standard deviation `sqrt(S_p)` (Pa).
+    pub s_p: f64,
+    /// Normalized throttle-flow residual (-), NaN when the throttle is not choked.
+    pub z_w: f64,
+    /// Its standard deviation (kg/s).
+    pub s_w: f64,
+    /// Manifold pressure-error decay over the segment, `e^{j dt}` (-).
+    pub decay: f64,
+    /// Pressure change per unit inflow over the segment, `R T / V dt phi1(j dt)` (Pa s/kg).
+    pub input_gain: f64,
+    /// MAF reading (kg/s).
+    pub maf: f64,
+    /// EGR flow of the fully open valve at the current pressure (kg/s).
+    pub egr_full: f64,
+    /// EGR command (0..1).
+    pub egr_cmd: f64,
+    /// Flow through a 1 m^2 hole from ambient at the current pressure (kg/s/m^2).
+    pub leak_unit: f64,
+}
+
+/// Fitted size of a hypothesis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fit {
+    pub fault: IntakeFault,
+    /// GLR statistic `T` (-).
+    pub glr: f64,
+    /// Best parameter: bias (Pa), gain error `g - 1` (-), stuck position (0..1), hole area (m^2).
+    pub parameter: f64,
+}
+
+/// Running least-squares sums since the onset.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct HypothesisBank {
+    /// Pressure responses: MAF (u = -MAF), EGR full-open (u = W_egr1), EGR command
+    /// (u = W_egr1 e_cmd), leak (u = W_orifice1).
+    delta: [f64; 4],
+    /// sum z^2 over both channels.
+    szz: f64,
+    /// Single-parameter hypotheses (MAP, MAF, leak): sum g^2 and sum g z.
+    sgg: [f64; 3],
+    sgz: [f64; 3],
+    /// EGR: sum g1^2, sum g1 v, sum v^2 with v = z_p + g2.
+    e11: f64,
+    e1v: f64,
+    evv: f64,
+    /// Pressure-channel sum z^2 (the EGR hypothesis leaves the flow channel unexplained).
+    szz_p: f64,
+    segments: usize,
+}
+
+impl HypothesisBank {
+    /// A bank with nothing accumulated (onset now).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Forgets everything: the fault is taken to start with the next segment.
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
+
+    /// Segments accumulated.
+    pub fn segments(&self) -> usize {
+        self.segments
+    }
+
+    /// Adds one segment. Residuals are not clipped: a fault's residual is large by nature, and
+    /// clipping it would bias every fit towards the hypotheses with the flattest signature.
+    pub fn push(&mut self, r: &SegmentRecord) {
+        let inflows = [-r.maf, r.egr_full, r.egr_full * r.egr_cmd, r.leak_unit];
+        for (d, u) in self.delta.iter_mut().zip(inflows) {
+            *d = r.decay * *d + r.input_gain * u;
+        }
+        self.segments += 1;
+        if r.z_p.is_finite() && r.s_p > 0.0 {
+            let z = r.z_p;
+            let g = [1.0 / r.s_p, self.delta[0] / r.s_p, self.delta[3] / r.s_p];
+            self.szz += z * z;
+            self.szz_p += z * z;
+            for ((gg, gz), gi) in self.sgg.iter_mut().zip(self.sgz.iter_mut()).zip(g) {
+                *gg += gi * gi;
+                *gz += gi * z;
+            }
+            let g1 = self.delta[1] / r.s_p;
+            let v = z + self.delta[2] / r.s_p;
+            self.e11 += g1 * g1;
+            self.e1v += g1 * v;
+            self.evv += v * v;
+        }
+        if r.z_w.is_finite() && r.s_w > 0.0 {
+            let z = r.z_w;
+            let g = r.maf / r.s_w;
+            self.szz += z * z;
+            self.sgg[1] += g * g;
+            self.sgz[1] += g * z;
+        }
+    }
+
+    /// Best fit of every hypothesis, in bank order ([`ALL_FAULTS`]).
+    pub fn fits(&self) -> [Fit; HYPOTHESES] {
+        let one = |i: usize, nonneg: bool| -> (f64, f64) {
+            if !(self.sgg[i] > 0.0) {
+                return (0.0, 0.0);
+            }
+            let theta = self.sgz[i] / self.sgg[i];
+            if nonneg && theta < 0.0 {
+                return (0.0, 0.0);
+            }
+            (self.sgz[i] * theta, theta)
+        };
+        let (t_map, b) = one(0, false);
+        let (t_maf, g) = one(1, false);
+        let (t_leak, a) = one(2, true);
+        // EGR: minimize sum (v - s g1)^2 over s in [0, 1]; the statistic is the drop from the
+        // no-fault sum z_p^2 (can be negative when the command moved: then it explains nothing).
+        let (t_egr, s) = if self.e11 > 0.0 {
+            let s = (self.e1v / self.e11).clamp(0.0, 1.0);
+            let rss = self.evv - 2.0 * s * self.e1v + s * s * self.e11;
+            ((self.szz_p - rss).max(0.0), s)
+        } else {
+            (0.0, 0.0)
+        };
+        [
+            Fit {
+                fault: IntakeFault::MapSensor,
+                glr: t_map,
+                parameter: b,
+            },
+            Fit {
+                fault: IntakeFault::MafSensor,
+                glr: t_maf,
+                parameter: g,
+            },
+            Fit {
+                fault: IntakeFault::EgrValve,
+                glr: t_egr,
+                parameter: s,
+            },
+            Fit {
+                fault: IntakeFault::Leak,
+                glr: t_leak,
+                parameter: a,
+            },
+        ]
+    }
+
+    /// Hypotheses sorted by decreasing statistic.
+    pub fn ranked(&self) -> [Fit; HYPOTHESES] {
+        let mut f = self.fits();
+        f.sort_unstable_by(|a, b| b.glr.total_cmp(&a.glr));
+        f
+    }
+
+    /// The fit of one hypothesis.
+    pub fn fit(&self, fault: IntakeFault) -> Fit {
+        self.fits()[fault.index()]
+    }
+}
+
+/// Fixed-capacity history of segment records, so that a bank can be refitted from an onset
+/// estimated after the fact.
+#[derive(Debug, Clone)]
+pub struct RecordRing {
+    buf: Box<[SegmentRecord]>,
+    head: usize,
+    len: usize,
+}
+
+impl RecordRing {
+    /// A ring of `capacity` records (allocated once, here).
+    pub fn new(capacity: usize) -> Self {
+        Self {
+            buf: vec![SegmentRecord::default(); capacity.max(1)].into_boxed_slice(),
+            head: 0,
+            len: 0,
+        }
+    }
+
+    /// Appends a record, dropping the oldest when full.
+    pub fn push(&mut self, r: SegmentRecord) {
+        let cap = self.buf.len();
+        self.buf[self.head] = r;
+        self.head = (self.head + 1) % cap;
+        self.len = (self.len + 1).min(cap);
+    }
+
+    /// Records held.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Forgets everything.
+    pub fn clear(&mut self) {
+        self.head = 0;
+        self.len = 0;
+    }
+
+    /// The last `n` records (at most all held), oldest first.
+    pub fn last(&self, n: usize) -> impl Iterator<Item = &SegmentRecord> {
+        let cap = self.buf.len();
+        let n = n.min(self.len);
+        let start = (self.head + cap - n) % cap;
+        (0..n).map(move |i| &self.buf[(start + i) % cap])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(z_p: f64, z_w: f64, maf: f64, egr_cmd: f64) -> SegmentRecord {
+        SegmentRecord {
+            z_p,
+            s_p: 800.0,
+            z_w,
+            s_w: 3e-4,
+            decay: 0.85,
+            input_gain: 3.5e5,
+            maf,
+            egr_full: 0.011,
+            egr_cmd,
+            leak_unit: 240.0,
+        }
+    }
+
+    /// Feeds the bank what a fault of each kind would produce and checks it is ranked first
+    /// with the right size.
+    fn simulate(fault: IntakeFault, theta: f64) -> HypothesisBank {
+        let mut bank = HypothesisBank::new();
+        let (mut d_maf, mut d_e, mut d_leak) = (0.0, 0.0, 0.0);
+        for k in 0..200 {
+            // Operating point and EGR command changing over time.
+            let maf = 0.01 + 0.02 * ((k / 40) % 2) as f64;
+            let cmd = if (k / 25) % 2 == 0 { 0.0 } else { 0.3 };
+            let mut r = record(0.0, f64::NAN, maf, cmd);
+            d_maf = r.decay * d_maf + r.input_gain * (-maf);
+            d_e = r.decay * d_e + r.input_gain * r.egr_full * (theta - cmd);
+            d_leak = r.decay * d_leak + r.input_gain * r.leak_unit;
+            let choked = k % 2 == 0;
+            let (p, w) = match fault {
+                IntakeFault::MapSensor => (theta, 0.0),
+                IntakeFault::MafSensor => (theta * d_maf, theta * maf),
+                IntakeFault::EgrValve => (d_e, 0.0),
+                IntakeFault::Leak => (theta * d_leak, 0.0),
+            };
+            r.z_p = p / r.s_p;
+            r.z_w = if choked { w / r.s_w } else { f64::NAN };
+            bank.push(&r);
+        }
+        bank
+    }
+
+    #[test]
+    fn each_noise_free_signature_ranks_its_own_hypothesis_first() {
+        for (fault, theta) in [
+            (IntakeFault::MapSensor, 5000.0),
+            (IntakeFault::MafSensor, 0.1),
+            (IntakeFault::EgrValve, 0.3),
+            (IntakeFault::Leak, 7.07e-6),
+        ] {
+            let bank = simulate(fault, theta);
+            let ranked = bank.ranked();
+            assert_eq!(ranked[0].fault, fault, "{fault:?}: {ranked:?}");
+            let rel = (ranked[0].parameter - theta).abs() / theta;
+            assert!(
+                rel < 1e-9,
+                "{fault:?}: fitted {} vs {theta}",
+                ranked[0].parameter
+            );
+            assert!(ranked[0].glr > ranked[1].glr + 1.0, "{ranked:?}");
+        }
+    }
+
+    #[test]
+    fn no_residual_gives_no_evidence() {
+        let mut bank = HypothesisBank::new();
+        for k in 0..100 {
+            bank.push(&record(0.0, 0.0, 0.02, if k < 50 { 0.0 } else { 0.3 }));
+        }
+        for f in bank.fits() {
+            assert!(f.glr.abs() < 1e-12, "{f:?}");
+        }
+    }
+
+    #[test]
+    fn leak_area_and_egr_position_respect_their_bounds() {
+        // A negative pressure residual cannot be a leak (area >= 0).
+        let mut bank = HypothesisBank::new();
+        for _ in 0..50 {
+            bank.push(&record(-3.0, f64::NAN, 0.02, 0.0));
+        }
+        let leak = bank.fit(IntakeFault::Leak);
+        assert_eq!(leak.glr, 0.0);
+        assert_eq!(leak.parameter, 0.0);
+        let egr = bank.fit(IntakeFault::EgrValve);
+        assert!((0.0..=1.0).contains(&egr.parameter));
+    }
+
+    #[test]
+    fn ring_returns_the_last_records_in_order() {
+        let mut ring = RecordRing::new(4);
+        for k in 0..6 {
+            ring.push(record(k as f64, 0.0, 0.0, 0.0));
+        }
+        let got: Vec<f64> = ring.last(3).map(|r| r.z_p).collect();
+        assert_eq!(got, vec![3.0, 4.0, 5.0]);
+        let all: Vec<f64> = ring.last(10).map(|r| r.z_p).collect();
+        assert_eq!(all, vec![2.0, 3.0, 4.0, 5.0]);
+    }
+}

@@ -1,0 +1,1074 @@
+//! The intake-manifold monitor: the MAP/MAF EKF paper's three filter architectures run side by
+//! side as residual generators, tests on their innovations, a fault-hypothesis bank that tells
+//! the MAP sensor, the MAF sensor, the EGR valve and a manifold leak apart, and the DTCs.
+//!
+//! Sampling is crank-synchronous: one sample of engine speed, throttle opening, EGR command,
+//! MAP and MAF per 180 deg segment, so the step length `30 / N` changes every segment. The
+//! monitor polls the signal table every `poll_period_s` and runs one segment whenever a MAP and
+//! a MAF sample with the same, newer, time stamp are there.
+//!
+//! Filters (the paper's model, `ThrottleFlow::RandomWalk`: the throttle flow is a random walk):
+//! - the **centralized EKF** on MAP and MAF;
+//! - the **decentralized pair** of the paper: a MAP-only and a MAF-only local EKF and the naive
+//!   master fusion (optimistic covariance, reported as it is);
+//! - the **federated filter** (fusion-reset, information shares), consistent.
+//!
+//! One of them (`primary_filter`) gives the estimate output (manifold pressure and
+//! intake-valve flow). The local filters are what makes isolation possible: each sees one
+//! sensor, so each predicts the *other* sensor from the model alone.
+//!
+//! Tests, each reported every segment on `/fdd/tests`:
+//! - `intake_pressure_consistency`: CUSUM on the MAP reading against the MAF-local filter's MAP
+//!   prediction (normalized);
+//! - `intake_flow_consistency`: CUSUM on the MAF reading against the MAP-local filter's MAF
+//!   prediction;
+//! - `intake_throttle_model`: CUSUM on the MAF reading against the nozzle flow of the commanded
+//!   throttle opening, only while the throttle is choked (then the throttle flow depends on the
+//!   opening alone, so this test sees only the MAF sensor);
+//! - `intake_centralized_nis`, `intake_federated_nis`: windowed sums of the 2-dof NIS;
+//! - `intake_map_circuit`, `intake_maf_circuit`: readings outside the circuit range (kept out
+//!   of the filters);
+//! - `intake_input_range`: an engine speed, throttle or EGR input the model refuses (speed 0 or
+//!   negative, NaN): the segment is skipped, nothing reaches the filters.
+//!
+//! Decision: a circuit range violation lasting `circuit_persist_segments` is a circuit fault
+//! (P0107/P0108, P0102/P0103). When a residual test fails, the hypothesis bank
+//! ([`hypotheses`]) is refitted from the failing test's estimated onset (the last time its
+//! CUSUM was zero) and then follows every segment; the best hypothesis is named when it is
+//! significant and leads the runner-up clearly (see [`IntakeMonitorConfig`]). The EGR DTC is
+//! P0401 (insufficient) when the fitted stuck position is below the mean command since the
+//! onset, P0402 (excessive) otherwise. A named fault is latched for the operation cycle.
+
+pub mod config;
+pub mod hypotheses;
+
+use fdd_diagnostics::detectors::{two_sided_arl, Cusum, CusumConfig, CusumSide, Detector};
+use fdd_diagnostics::dtc::{
+    DebounceConfig, EventConfig, EventId, EventMemory, EventMemoryConfig, MilConfig, ReportContext,
+};
+use fdd_diagnostics::event::DiagnosticEvent;
+use fdd_diagnostics::{TestResult, Verdict};
+use fdd_estimators::models::intake::{
+    IntakeInput, IntakeModel, IntakeState, MafSensor, MapMafSensors, MapSensor, ThrottleFlow, X_PM,
+    X_PMES, X_WMES, X_WTHR,
+};
+use fdd_estimators::{DecentralizedPair, Ekf, FederatedFilter, FusionNoise};
+use nalgebra::{Matrix1, Matrix2, SMatrix, SVector, Vector1, Vector2};
+
+pub use config::{IntakeMonitorConfig, PrimaryFilter};
+pub use hypotheses::{Fit, HypothesisBank, IntakeFault, RecordRing, SegmentRecord, ALL_FAULTS};
+
+use crate::monitor::{Monitor, Output, OutputSink};
+use crate::signal_table::{SignalId, SignalTable};
+
+/// Segments kept for refitting from an onset (5 s at 6000 rpm, 38 s at 800 rpm).
+const HISTORY: usize = 1024;
+/// Capacity of the NIS windows.
+const NIS_RING: usize = 512;
+/// Segments the throttle must have been choked before its flow residual is used (the MAF lag
+/// and the lagged model flow have settled).
+const CHOKED_SETTLE: u32 = 3;
+
+/// Event names, in the order of the DTC settings.
+pub const EVENT_NAMES: [&str; 9] = [
+    "map_range_performance",
+    "map_circuit_low",
+    "map_circuit_high",
+    "maf_range_performance",
+    "maf_circuit_low",
+    "maf_circuit_high",
+    "egr_flow_insufficient",
+    "egr_flow_excessive",
+    "intake_leak",
+];
+
+/// What the monitor named this operation cycle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum IntakeDecision {
+    /// A residual fault isolated by the hypothesis bank, with its fitted size.
+    Residual { fit: Fit, event: usize },
+    /// A circuit range fault (event index into [`EVENT_NAMES`]).
+    Circuit { event: usize },
+}
+
+impl IntakeDecision {
+    /// Index of the DTC event in [`EVENT_NAMES`].
+    pub fn event(&self) -> usize {
+        match *self {
+            IntakeDecision::Residual { event, .. } | IntakeDecision::Circuit { event } => event,
+        }
+    }
+
+    /// Name of the event.
+    pub fn event_name(&self) -> &'static str {
+        EVENT_NAMES[self.event()]
+    }
+}
+
+/// Errors building the monitor.
+#[derive(Debug, thiserror::Error)]
+pub enum IntakeMonitorError {
+    #[error("intake monitor: signal `{0}` is not in the signal table")]
+    MissingSignal(String),
+    #[error("intake monitor: invalid setting `{key}`: {reason}")]
+    Setting { key: &'static str, reason: String },
+    #[error("intake monitor: {0}")]
+    Filter(#[from] fdd_estimators::ConfigError),
+    #[error("intake monitor: {0}")]
+    Diagnostics(#[from] fdd_diagnostics::ConfigError),
+}
+
+fn setting(key: &'static str, reason: impl Into<String>) -> IntakeMonitorError {
+    IntakeMonitorError::Setting {
+        key,
+        reason: reason.into(),
+    }
+}
+
+/// One crank segment's inputs and readings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Segment {
+    /// Engine speed (rpm).
+    pub speed_rpm: f64,
+    /// Throttle opening (deg from the closed plate).
+    pub throttle_deg: f64,
+    /// EGR command (0..1).
+    pub egr_cmd: f64,
+    /// MAP reading (Pa).
+    pub map_pa: f64,
+    /// MAF reading (kg/s).
+    pub maf_kg_s: f64,
+}
+
+/// A CUSUM that also remembers when each side was last zero (the onset estimate).
+#[derive(Debug, Clone)]
+struct OnsetCusum {
+    cusum: Cusum,
+    upper_zero: u64,
+    lower_zero: u64,
+}
+
+impl OnsetCusum {
+    fn new(key: &'static str, delta: f64, h: f64) -> Result<Self, IntakeMonitorError> {
+        if !(delta > 0.0 && h > 0.0 && delta.is_finite() && h.is_finite()) {
+            return Err(setting(key, "min bias and threshold must be positive"));
+        }
+        let arl = two_sided_arl(0.0, delta / 2.0, h);
+        Ok(Self {
+            cusum: Cusum::new(&CusumConfig {
+                min_bias_sigma: delta,
+                mean_steps_between_false_alarms: Some(arl),
+                false_alarm_rate: None,
+            })?,
+            upper_zero: 0,
+            lower_zero: 0,
+        })
+    }
+
+    /// Steps the CUSUM at segment `k`; on an alarm also returns the onset segment.
+    fn step(&mut self, k: u64, z: f64, enabled: bool) -> (TestResult, Option<u64>) {
+        let r = self.cusum.step(z, enabled && z.is_finite());
+        let onset = if r.verdict == Verdict::Failed {
+            match self.cusum.alarm_side() {
+                Some(CusumSide::Upper) => Some(self.upper_zero + 1),
+                _ => Some(self.lower_zero + 1),
+            }
+        } else {
+            None
+        };
+        if self.cusum.upper() == 0.0 {
+            self.upper_zero = k;
+        }
+        if self.cusum.lower() == 0.0 {
+            self.lower_zero = k;
+        }
+        (r, onset)
+    }
+
+    fn reset(&mut self) {
+        self.cusum.reset();
+        self.upper_zero = 0;
+        self.lower_zero = 0;
+    }
+}
+
+/// Windowed NIS sum.
+#[derive(Debug, Clone)]
+struct NisWindow {
+    buf: [f64; NIS_RING],
+    cap: usize,
+    len: usize,
+    head: usize,
+    sum: f64,
+}
+
+impl NisWindow {
+    fn new(cap: usize) -> Self {
+        Self {
+            buf: [0.0; NIS_RING],
+            cap: cap.clamp(1, NIS_RING),
+            len: 0,
+            head: 0,
+            sum: 0.0,
+        }
+    }
+
+    fn step(&mut self, nis: f64, cap: f64, threshold: f64) -> TestResult {
+        if !nis.is_finite() {
+            return TestResult::NOT_TESTED;
+        }
+        let v = nis.min(cap);
+        if self.len == self.cap {
+            self.sum -= self.buf[self.head];
+        }
+        self.buf[self.head] = v;
+        self.head = (self.head + 1) % self.cap;
+        self.len = (self.len + 1).min(self.cap);
+        self.sum += v;
+        let failed = self.len == self.cap && self.sum > threshold;
+        TestResult {
+            value: self.sum,
+            min: 0.0,
+            max: threshold,
+            verdict: if failed {
+                Verdict::Failed
+            } else {
+                Verdict::Passed
+            },
+        }
+    }
+
+    fn clear(&mut self) {
+        self.len = 0;
+        self.head = 0;
+        self.sum = 0.0;
+    }
+}
+
+/// An open isolation episode.
+#[derive(Debug, Clone, Copy)]
+struct Episode {
+    alarm_s: f64,
+    /// The residual test that opened it.
+    result: TestResult,
+    cmd_sum: f64,
+    segments: u64,
+}
+
+type Central = Ekf<IntakeModel, MapMafSensors, 6, 2, 3>;
+type Pair = DecentralizedPair<IntakeModel, MapSensor, MafSensor, 6, 1, 1, 3>;
+type Federated = FederatedFilter<IntakeModel, MapSensor, MafSensor, 6, 1, 1, 3>;
+
+/// The three filters, built together from one initial estimate.
+#[derive(Debug, Clone)]
+struct Filters {
+    central: Central,
+    pair: Pair,
+    federated: Federated,
+}
+
+/// The monitor. Everything is sized at construction; a segment without a status change
+/// allocates nothing.
+pub struct IntakeMonitor {
+    cfg: IntakeMonitorConfig,
+    model: IntakeModel,
+    inputs: [SignalId; 5],
+    period_ns: u64,
+    q: SMatrix<f64, 6, 6>,
+    r_map: f64,
+    r_maf: f64,
+    /// `R T_m / V_m` (Pa/kg).
+    gain: f64,
+    filters: Option<Filters>,
+    last_t_ns: Option<u64>,
+    segment: u64,
+    skipped: u64,
+    rejected: u64,
+    w_model_lag: f64,
+    choked_run: u32,
+    cusum_p: OnsetCusum,
+    cusum_x: OnsetCusum,
+    cusum_t: OnsetCusum,
+    nis_central: NisWindow,
+    nis_federated: NisWindow,
+    map_low_run: u32,
+    map_high_run: u32,
+    maf_low_run: u32,
+    maf_high_run: u32,
+    history: RecordRing,
+    bank: HypothesisBank,
+    episode: Option<Episode>,
+    decided: Option<IntakeDecision>,
+    deciding: TestResult,
+    candidates: [(&'static str, f64); 4],
+    memory: EventMemory,
+    event_ids: [EventId; 9],
+    statuses: [u8; 9],
+}
+
+impl IntakeMonitor {
+    /// Builds the monitor on the intake model's parameters (the filters use the paper's
+    /// random-walk throttle flow whatever `model`'s mode), reading the named signals of `table`.
+    pub fn new(
+        model: &IntakeModel,
+        cfg: &IntakeMonitorConfig,
+        table: &SignalTable,
+    ) -> Result<Self, IntakeMonitorError> {
+        let id = |name: &str| {
+            table
+                .id(name)
+                .ok_or_else(|| IntakeMonitorError::MissingSignal(name.to_string()))
+        };
+        let inputs = [
+            id(&cfg.speed_signal)?,
+            id(&cfg.throttle_signal)?,
+            id(&cfg.egr_signal)?,
+            id(&cfg.map_signal)?,
+            id(&cfg.maf_signal)?,
+        ];
+        for (key, v) in [
+            ("poll_period_s", cfg.poll_period_s),
+            ("map_noise_pa", cfg.map_noise_pa),
+            ("maf_noise_kg_s", cfg.maf_noise_kg_s),
+            ("maf_noise_rel", cfg.maf_noise_rel),
+            ("map_high_ratio", cfg.map_high_ratio),
+            ("maf_high_kg_s", cfg.maf_high_kg_s),
+            ("clip_sigma", cfg.clip_sigma),
+            ("choked_ratio", cfg.choked_ratio),
+            ("nis_cap", cfg.nis_cap),
+            ("nis_threshold", cfg.nis_threshold),
+            ("isolation_min_glr", cfg.isolation_min_glr),
+            ("isolation_max_s", cfg.isolation_max_s),
+        ] {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(setting(key, format!("{v} must be a positive number")));
+            }
+        }
+        for (key, v) in [
+            ("map_low_pa", cfg.map_low_pa),
+            ("maf_low_kg_s", cfg.maf_low_kg_s),
+            ("throttle_model_rel", cfg.throttle_model_rel),
+            ("isolation_margin", cfg.isolation_margin),
+            ("isolation_min_s", cfg.isolation_min_s),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(setting(key, format!("{v} must be a number >= 0")));
+            }
+        }
+        if cfg.nis_window == 0 || cfg.nis_window > NIS_RING {
+            return Err(setting("nis_window", format!("must be 1..={NIS_RING}")));
+        }
+        if cfg.circuit_persist_segments == 0 {
+            return Err(setting("circuit_persist_segments", "must be at least 1"));
+        }
+        for (i, v) in cfg.q_std.iter().chain(cfg.p0_std.iter()).enumerate() {
+            let key = if i < 6 { "q_std" } else { "p0_std" };
+            if !(v.is_finite() && *v >= 0.0) {
+                return Err(setting(key, format!("entry {} = {v} must be >= 0", i % 6)));
+            }
+        }
+        let model = IntakeModel::new(model.params().clone(), ThrottleFlow::RandomWalk)
+            .map_err(|reason| setting("model", reason))?;
+        let p = model.params();
+        let q_std = SVector::<f64, 6>::from(cfg.q_std);
+        let events = EVENT_NAMES
+            .iter()
+            .zip([
+                &cfg.dtc_map_performance,
+                &cfg.dtc_map_low,
+                &cfg.dtc_map_high,
+                &cfg.dtc_maf_performance,
+                &cfg.dtc_maf_low,
+                &cfg.dtc_maf_high,
+                &cfg.dtc_egr_insufficient,
+                &cfg.dtc_egr_excessive,
+                &cfg.dtc_leak,
+            ])
+            .map(|(name, dtc)| EventConfig {
+                name: name.to_string(),
+                dtc: dtc.clone(),
+                priority: 2,
+                // The monitor qualifies its own results (persistence and isolation).
+                debounce: DebounceConfig::MonitorInternal,
+                confirmation_threshold: 2,
+                aging_threshold: 40,
+                mil: MilConfig::default(),
+                freeze_frame: Vec::new(),
+                freeze_frame_update: Default::default(),
+            })
+            .collect();
+        let memory = EventMemory::new(&EventMemoryConfig {
+            capacity: 8,
+            events,
+        })?;
+        let mut event_ids = [memory
+            .event_id(EVENT_NAMES[0])
+            .ok_or_else(|| setting("dtc", "event missing"))?; 9];
+        for (i, name) in EVENT_NAMES.iter().enumerate() {
+            event_ids[i] = memory
+                .event_id(name)
+                .ok_or_else(|| setting("dtc", "event missing"))?;
+        }
+        let mut monitor = Self {
+            period_ns: (cfg.poll_period_s * 1e9).round().max(1.0) as u64,
+            q: SMatrix::from_diagonal(&q_std.component_mul(&q_std)),
+            r_map: cfg.map_noise_pa * cfg.map_noise_pa,
+            r_maf: cfg.maf_noise_kg_s * cfg.maf_noise_kg_s,
+            gain: p.gas_constant_j_per_kg_k * p.manifold_temperature_k / p.manifold_volume_m3,
+            filters: None,
+            last_t_ns: None,
+            segment: 0,
+            skipped: 0,
+            rejected: 0,
+            w_model_lag: f64::NAN,
+            choked_run: 0,
+            cusum_p: OnsetCusum::new(
+                "pressure_cusum_threshold",
+                cfg.pressure_cusum_min_bias_sigma,
+                cfg.pressure_cusum_threshold,
+            )?,
+            cusum_x: OnsetCusum::new(
+                "flow_cusum_threshold",
+                cfg.flow_cusum_min_bias_sigma,
+                cfg.flow_cusum_threshold,
+            )?,
+            cusum_t: OnsetCusum::new(
+                "throttle_cusum_threshold",
+                cfg.throttle_cusum_min_bias_sigma,
+                cfg.throttle_cusum_threshold,
+            )?,
+            nis_central: NisWindow::new(cfg.nis_window),
+            nis_federated: NisWindow::new(cfg.nis_window),
+            map_low_run: 0,
+            map_high_run: 0,
+            maf_low_run: 0,
+            maf_high_run: 0,
+            history: RecordRing::new(HISTORY),
+            bank: HypothesisBank::new(),
+            episode: None,
+            decided: None,
+            deciding: TestResult::NOT_TESTED,
+            candidates: [("", 0.0); 4],
+            statuses: [0x50; 9],
+            memory,
+            event_ids,
+            inputs,
+            model,
+            cfg: cfg.clone(),
+        };
+        // Check the filter settings now rather than at the first segment.
+        let idle = IntakeInput::new(800.0, 2.0, 0.0);
+        monitor.build_filters(&idle)?;
+        monitor.filters = None;
+        Ok(monitor)
+    }
+
+    /// The fault named this operation cycle, if any.
+    pub fn decision(&self) -> Option<IntakeDecision> {
+        self.decided
+    }
+
+    /// The hypotheses ranked by their statistic, as of the last segment of the current or last
+    /// isolation episode.
+    pub fn ranked_hypotheses(&self) -> [Fit; 4] {
+        self.bank.ranked()
+    }
+
+    /// Segments processed, skipped for a refused input or reading, and refused by a filter.
+    pub fn counts(&self) -> (u64, u64, u64) {
+        (self.segment, self.skipped, self.rejected)
+    }
+
+    /// The centralized EKF's state, if the filters run.
+    pub fn centralized_state(&self) -> Option<&IntakeState> {
+        self.filters.as_ref().map(|f| f.central.state())
+    }
+
+    fn build_filters(&mut self, u: &IntakeInput) -> Result<(), IntakeMonitorError> {
+        let x0 = self
+            .model
+            .equilibrium(u)
+            .ok_or_else(|| setting("model", format!("no equilibrium at {u:?}")))?;
+        let w0 = x0[X_WTHR].abs().max(1e-4);
+        let s = &self.cfg.p0_std;
+        let p0_std = SVector::<f64, 6>::from([s[0], s[1], s[2] * w0, s[3] * w0, s[4], s[5]]);
+        let p0 = SMatrix::<f64, 6, 6>::from_diagonal(&p0_std.component_mul(&p0_std));
+        let noise = FusionNoise {
+            q: self.q,
+            r1: Matrix1::new(self.r_map),
+            r2: Matrix1::new(self.r_maf),
+        };
+        let central = Ekf::new(
+            self.model.clone(),
+            MapMafSensors,
+            x0,
+            p0,
+            self.q,
+            Matrix2::from_diagonal(&Vector2::new(self.r_map, self.r_maf)),
+        )?;
+        let pair = DecentralizedPair::new(self.model.clone(), MapSensor, MafSensor, x0, p0, noise)?;
+        let federated = FederatedFilter::new(
+            self.model.clone(),
+            MapSensor,
+            MafSensor,
+            x0,
+            p0,
+            noise,
+            self.cfg.federated_shares,
+        )?;
+        self.filters = Some(Filters {
+            central,
+            pair,
+            federated,
+        });
+        self.w_model_lag = x0[X_WTHR];
+        Ok(())
+    }
+
+    fn report_all(&mut self, now_s: f64, verdicts: [Verdict; 9], out: &mut OutputSink<'_>) {
+        let named = self.decided.is_some();
+        for (i, &verdict) in verdicts.iter().enumerate() {
+            let result = if verdict == Verdict::Failed {
+                self.deciding
+            } else {
+                TestResult {
+                    value: 0.0,
+                    min: 0.0,
+                    max: 0.0,
+                    verdict,
+                }
+            };
+            let cands = self.candidates;
+            let ctx = if named && verdict == Verdict::Failed {
+                ReportContext::at(now_s).with_candidates(&cands)
+            } else {
+                ReportContext::at(now_s)
+            };
+            let mut sink = |e: DiagnosticEvent| out(Output::Event(&e));
+            if let Ok(status) = self
+                .memory
+                .report(self.event_ids[i], &result, &ctx, &mut sink)
+            {
+                if status.byte() != self.statuses[i] {
+                    self.statuses[i] = status.byte();
+                    out(Output::DtcStatus {
+                        dtc: self.memory.dtc(self.event_ids[i]),
+                        status,
+                    });
+                }
+            }
+        }
+    }
+
+    /// Circuit range check of one reading: updates the run counters and says whether the
+    /// reading is usable.
+    fn circuit(run_low: &mut u32, run_high: &mut u32, low: bool, high: bool) -> bool {
+        *run_low = if low { *run_low + 1 } else { 0 };
+        *run_high = if high { *run_high + 1 } else { 0 };
+        !(low || high)
+    }
+
+    /// Runs one crank segment ending at `t_ns`.
+    pub fn process_segment(&mut self, t_ns: u64, seg: &Segment, out: &mut OutputSink<'_>) {
+        let now_s = t_ns as f64 * 1e-9;
+        self.segment += 1;
+        let k = self.segment;
+        let u = IntakeInput::new(seg.speed_rpm, seg.throttle_deg, seg.egr_cmd);
+        if let Err(e) = self.model.check_input(&u) {
+            // Engine stopped, a speed sensor fault or a broken input: no step, no verdict.
+            self.skipped += 1;
+            let (value, min, max) = match e {
+                fdd_estimators::models::intake::IntakeInputError::NonFinite { value, .. } => {
+                    (value, f64::NAN, f64::NAN)
+                }
+                fdd_estimators::models::intake::IntakeInputError::OutOfRange {
+                    value,
+                    min,
+                    max,
+                    ..
+                } => (value, min, max),
+            };
+            if self.skipped == 1 {
+                tracing::warn!(time_s = now_s, "intake monitor: segment skipped: {e}");
+            }
+            out(Output::Test {
+                test: "intake_input_range",
+                result: TestResult {
+                    value,
+                    min,
+                    max,
+                    verdict: Verdict::Failed,
+                },
+            });
+            return;
+        }
+
+        if !(seg.map_pa.is_finite() && seg.maf_kg_s.is_finite()) {
+            // A NaN or infinite reading (the signal table refuses them; a host calling this
+            // directly may not): no step, no verdict.
+            self.skipped += 1;
+            let value = if seg.map_pa.is_finite() {
+                seg.maf_kg_s
+            } else {
+                seg.map_pa
+            };
+            out(Output::Test {
+                test: "intake_input_range",
+                result: TestResult {
+                    value,
+                    min: f64::NAN,
+                    max: f64::NAN,
+                    verdict: Verdict::Failed,
+                },
+            });
+            return;
+        }
+
+        // Circuit range checks (the readings that fail them never reach the filters).
+        let p_a = self.model.params().ambient_pressure_pa;
+        let map_ok = Self::circuit(
+            &mut self.map_low_run,
+            &mut self.map_high_run,
+            !(seg.map_pa >= self.cfg.map_low_pa),
+            seg.map_pa > self.cfg.map_high_ratio * p_a,
+        );
+        let maf_ok = Self::circuit(
+            &mut self.maf_low_run,
+            &mut self.maf_high_run,
+            !(seg.maf_kg_s >= self.cfg.maf_low_kg_s),
+            seg.maf_kg_s > self.cfg.maf_high_kg_s,
+        );
+        let circuit_result = |ok: bool, v: f64, lo: f64, hi: f64| TestResult {
+            value: v,
+            min: lo,
+            max: hi,
+            verdict: if ok { Verdict::Passed } else { Verdict::Failed },
+        };
+        out(Output::Test {
+            test: "intake_map_circuit",
+            result: circuit_result(
+                map_ok,
+                seg.map_pa,
+                self.cfg.map_low_pa,
+                self.cfg.map_high_ratio * p_a,
+            ),
+        });
+        out(Output::Test {
+            test: "intake_maf_circuit",
+            result: circuit_result(
+                maf_ok,
+                seg.maf_kg_s,
+                self.cfg.maf_low_kg_s,
+                self.cfg.maf_high_kg_s,
+            ),
+        });
+
+        let mut residual_alarm: Option<(TestResult, u64)> = None;
+        if map_ok && maf_ok {
+            if self.filters.is_none() && self.build_filters(&u).is_err() {
+                self.skipped += 1;
+                return;
+            }
+            residual_alarm = self.run_filters(k, &u, seg, out);
+        } else {
+            self.skipped += 1;
+        }
+
+        self.decide(now_s, k, seg, residual_alarm);
+
+        let mut verdicts = [Verdict::NotTested; 9];
+        match self.decided {
+            Some(d) => verdicts[d.event()] = Verdict::Failed,
+            None if self.episode.is_none()
+                && self.map_low_run == 0
+                && self.map_high_run == 0
+                && self.maf_low_run == 0
+                && self.maf_high_run == 0 =>
+            {
+                verdicts = [Verdict::Passed; 9];
+            }
+            None => {}
+        }
+        self.report_all(now_s, verdicts, out);
+        self.report_estimate(seg, out);
+    }
+
+    /// Steps the three filters and the residual tests; returns the first failing residual test
+    /// and its onset segment.
+    fn run_filters(
+        &mut self,
+        k: u64,
+        u: &IntakeInput,
+        seg: &Segment,
+        out: &mut OutputSink<'_>,
+    ) -> Option<(TestResult, u64)> {
+        let filters = self.filters.as_mut()?;
+        let y_map = Vector1::new(seg.map_pa);
+        let y_maf = Vector1::new(seg.maf_kg_s);
+        let central = filters.central.predict(u).and_then(|()| {
+            filters
+                .central
+                .update(&Vector2::new(seg.map_pa, seg.maf_kg_s), u)
+        });
+        let pair = filters.pair.step(u, &y_map, &y_maf);
+        let fed = filters.federated.step(u, &y_map, &y_maf);
+        let (Ok(ci), Ok(ps), Ok(fs)) = (central, pair, fed) else {
+            self.rejected += 1;
+            return None;
+        };
+        out(Output::Innovation {
+            filter: "intake_centralized",
+            residual: ci.residual.as_slice(),
+            variance: &[ci.covariance[(0, 0)], ci.covariance[(1, 1)]],
+            nis: ci.nis,
+            dof: ci.dof,
+        });
+        out(Output::Innovation {
+            filter: "intake_local_map",
+            residual: ps.local1.residual.as_slice(),
+            variance: &[ps.local1.covariance[(0, 0)]],
+            nis: ps.local1.nis,
+            dof: ps.local1.dof,
+        });
+        out(Output::Innovation {
+            filter: "intake_local_maf",
+            residual: ps.local2.residual.as_slice(),
+            variance: &[ps.local2.covariance[(0, 0)]],
+            nis: ps.local2.nis,
+            dof: ps.local2.dof,
+        });
+        out(Output::Innovation {
+            filter: "intake_federated",
+            residual: &[fs.local1.residual[0], fs.local2.residual[0]],
+            variance: &[fs.local1.covariance[(0, 0)], fs.local2.covariance[(0, 0)]],
+            nis: fs.nis,
+            dof: fs.dof,
+        });
+
+        // Cross residuals: each local filter predicts the sensor it does not use.
+        let (x_maf, p_maf) = (
+            filters.pair.local2().state(),
+            filters.pair.local2().covariance(),
+        );
+        let s_p = (p_maf[(X_PMES, X_PMES)] + self.r_map).sqrt();
+        let z_p = (seg.map_pa - x_maf[X_PMES]) / s_p;
+        let (x_map, p_map) = (
+            filters.pair.local1().state(),
+            filters.pair.local1().covariance(),
+        );
+        let s_x = (p_map[(X_WMES, X_WMES)] + self.r_maf).sqrt();
+        let z_x = (seg.maf_kg_s - x_map[X_WMES]) / s_x;
+
+        // Throttle-model flow residual, used only while choked.
+        let p = self.model.params();
+        let p_hat = filters.central.state()[X_PM];
+        let dt = IntakeModel::segment_dt(seg.speed_rpm);
+        let w_model = self.model.throttle_flow(p_hat, seg.throttle_deg);
+        let a = (-dt / p.maf_time_constant_s).exp();
+        self.w_model_lag = a * self.w_model_lag + (1.0 - a) * w_model;
+        let choked_limit = self.cfg.choked_ratio * p.ambient_pressure_pa;
+        let choked = p_hat < choked_limit && seg.map_pa < choked_limit;
+        self.choked_run = if choked { self.choked_run + 1 } else { 0 };
+        let s_w = ((self.cfg.maf_noise_rel * seg.maf_kg_s).powi(2)
+            + (self.cfg.throttle_model_rel * self.w_model_lag).powi(2))
+        .sqrt();
+        let z_w = if self.choked_run >= CHOKED_SETTLE && s_w > 0.0 {
+            (seg.maf_kg_s - self.w_model_lag) / s_w
+        } else {
+            f64::NAN
+        };
+
+        // Linearized manifold response over this segment (for the hypothesis bank).
+        let (slope, _) = self.model.vol_eff(seg.speed_rpm);
+        let egr_area = self.model.egr_area(seg.egr_cmd);
+        let d_egr = if egr_area > 0.0 {
+            self.model.egr_flow_area(p_hat, egr_area).1
+        } else {
+            0.0
+        };
+        let j = self.gain * (d_egr - slope);
+        let z = j * dt;
+        let record = SegmentRecord {
+            z_p,
+            s_p,
+            z_w,
+            s_w,
+            decay: z.exp(),
+            input_gain: self.gain * dt * phi1(z),
+            maf: seg.maf_kg_s,
+            egr_full: self.model.egr_flow_area(p_hat, p.egr_max_area_m2).0,
+            egr_cmd: seg.egr_cmd,
+            leak_unit: self.model.throttle_flow_area(p_hat, 1.0).0,
+        };
+        self.history.push(record);
+        if self.episode.is_some() {
+            self.bank.push(&record);
+        }
+
+        let clip = self.cfg.clip_sigma;
+        let (rp, onset_p) = self.cusum_p.step(k, z_p.clamp(-clip, clip), true);
+        let (rx, onset_x) = self.cusum_x.step(k, z_x.clamp(-clip, clip), true);
+        let (rt, onset_t) = self
+            .cusum_t
+            .step(k, z_w.clamp(-clip, clip), z_w.is_finite());
+        let rc = self
+            .nis_central
+            .step(ci.nis, self.cfg.nis_cap, self.cfg.nis_threshold);
+        let rf = self
+            .nis_federated
+            .step(fs.nis, self.cfg.nis_cap, self.cfg.nis_threshold);
+        let window_onset = k.saturating_sub(self.cfg.nis_window as u64 - 1);
+        let tests = [
+            ("intake_pressure_consistency", rp, onset_p),
+            ("intake_flow_consistency", rx, onset_x),
+            ("intake_throttle_model", rt, onset_t),
+            (
+                "intake_centralized_nis",
+                rc,
+                (rc.verdict == Verdict::Failed).then_some(window_onset),
+            ),
+            (
+                "intake_federated_nis",
+                rf,
+                (rf.verdict == Verdict::Failed).then_some(window_onset),
+            ),
+        ];
+        let mut alarm: Option<(TestResult, u64)> = None;
+        for (name, result, onset) in tests {
+            out(Output::Test { test: name, result });
+            if let (Verdict::Failed, Some(o)) = (result.verdict, onset) {
+                alarm = Some(match alarm {
+                    Some((r0, o0)) if o0 <= o => (r0, o0),
+                    _ => (result, o),
+                });
+            }
+        }
+        alarm
+    }
+
+    fn decide(
+        &mut self,
+        now_s: f64,
+        k: u64,
+        seg: &Segment,
+        residual_alarm: Option<(TestResult, u64)>,
+    ) {
+        if self.decided.is_some() {
+            return;
+        }
+        let persist = self.cfg.circuit_persist_segments;
+        let circuit = [
+            (self.map_low_run, 1, seg.map_pa, self.cfg.map_low_pa),
+            (self.map_high_run, 2, seg.map_pa, self.cfg.map_high_ratio),
+            (self.maf_low_run, 4, seg.maf_kg_s, self.cfg.maf_low_kg_s),
+            (self.maf_high_run, 5, seg.maf_kg_s, self.cfg.maf_high_kg_s),
+        ];
+        for (run, event, _value, _limit) in circuit {
+            if run >= persist {
+                self.deciding = TestResult {
+                    value: f64::from(run),
+                    min: 0.0,
+                    max: f64::from(persist - 1),
+                    verdict: Verdict::Failed,
+                };
+                self.candidates = [(EVENT_NAMES[event], 1.0), ("", 0.0), ("", 0.0), ("", 0.0)];
+                self.decided = Some(IntakeDecision::Circuit { event });
+                self.episode = None;
+                return;
+            }
+        }
+        if self.episode.is_none() {
+            if let Some((result, onset)) = residual_alarm {
+                // Refit the bank from the onset.
+                let back = (k + 1).saturating_sub(onset.max(1)) as usize;
+                self.bank.reset();
+                let (mut cmd_sum, mut n) = (0.0, 0u64);
+                for r in self.history.last(back) {
+                    self.bank.push(r);
+                    cmd_sum += r.egr_cmd;
+                    n += 1;
+                }
+                self.episode = Some(Episode {
+                    alarm_s: now_s,
+                    result,
+                    cmd_sum,
+                    segments: n,
+                });
+                return;
+            }
+            return;
+        }
+        let Some(mut ep) = self.episode else {
+            return;
+        };
+        ep.cmd_sum += seg.egr_cmd;
+        ep.segments += 1;
+        self.episode = Some(ep);
+        let ranked = self.bank.ranked();
+        let elapsed = now_s - ep.alarm_s;
+        let best = ranked[0];
+        let significant = best.glr >= self.cfg.isolation_min_glr;
+        let clear = best.glr - ranked[1].glr >= self.cfg.isolation_margin;
+        if elapsed >= self.cfg.isolation_min_s && significant && clear
+            || elapsed >= self.cfg.isolation_max_s && significant
+        {
+            let total: f64 = ranked
+                .iter()
+                .map(|f| f.glr.max(0.0))
+                .sum::<f64>()
+                .max(1e-12);
+            for (c, f) in self.candidates.iter_mut().zip(ranked.iter()) {
+                *c = (f.fault.name(), f.glr.max(0.0) / total);
+            }
+            let event = match best.fault {
+                IntakeFault::MapSensor => 0,
+                IntakeFault::MafSensor => 3,
+                IntakeFault::EgrValve => {
+                    let mean_cmd = ep.cmd_sum / ep.segments.max(1) as f64;
+                    if best.parameter < mean_cmd {
+                        6
+                    } else {
+                        7
+                    }
+                }
+                IntakeFault::Leak => 8,
+            };
+            self.deciding = TestResult {
+                value: best.glr,
+                min: 0.0,
+                max: self.cfg.isolation_min_glr,
+                verdict: Verdict::Failed,
+            };
+            let _first = ep.result;
+            self.decided = Some(IntakeDecision::Residual { fit: best, event });
+            self.episode = None;
+            tracing::debug!(
+                time_s = now_s,
+                fault = best.fault.name(),
+                parameter = best.parameter,
+                glr = best.glr,
+                "intake fault isolated"
+            );
+        } else if elapsed >= self.cfg.isolation_max_s {
+            // Unexplained alarm: no hypothesis is significant. Close the episode.
+            self.episode = None;
+        }
+    }
+
+    fn report_estimate(&self, seg: &Segment, out: &mut OutputSink<'_>) {
+        let Some(f) = &self.filters else {
+            return;
+        };
+        let (x, p) = match self.cfg.primary_filter {
+            PrimaryFilter::Centralized => (f.central.state(), f.central.covariance()),
+            PrimaryFilter::Decentralized => (f.pair.state(), f.pair.covariance()),
+            PrimaryFilter::Federated => (f.federated.state(), f.federated.covariance()),
+        };
+        let source = self.cfg.primary_filter.name();
+        let pm = x[X_PM];
+        let half = 1.96 * p[(X_PM, X_PM)].max(0.0).sqrt();
+        out(Output::Estimate {
+            name: "manifold_pressure",
+            value: pm,
+            lower: pm - half,
+            upper: pm + half,
+            source,
+        });
+        let (slope, _) = self.model.vol_eff(seg.speed_rpm);
+        let w = self.model.intake_valve_flow(pm, seg.speed_rpm);
+        out(Output::Estimate {
+            name: "intake_valve_flow",
+            value: w,
+            lower: w - slope * half,
+            upper: w + slope * half,
+            source,
+        });
+    }
+
+    fn reset_cycle_state(&mut self) {
+        self.filters = None;
+        self.last_t_ns = None;
+        self.decided = None;
+        self.deciding = TestResult::NOT_TESTED;
+        self.episode = None;
+        self.bank.reset();
+        self.history.clear();
+        self.cusum_p.reset();
+        self.cusum_x.reset();
+        self.cusum_t.reset();
+        self.nis_central.clear();
+        self.nis_federated.clear();
+        self.map_low_run = 0;
+        self.map_high_run = 0;
+        self.maf_low_run = 0;
+        self.maf_high_run = 0;
+        self.choked_run = 0;
+        self.segment = 0;
+    }
+}
+
+/// `phi1(z) = (e^z - 1) / z`.
+fn phi1(z: f64) -> f64 {
+    if z.abs() < 1e-8 {
+        1.0 + z / 2.0
+    } else {
+        z.exp_m1() / z
+    }
+}
+
+impl Monitor for IntakeMonitor {
+    fn name(&self) -> &str {
+        "intake"
+    }
+
+    fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+
+    fn inputs(&self) -> &[SignalId] {
+        &self.inputs
+    }
+
+    fn step(&mut self, now_ns: u64, signals: &SignalTable, out: &mut OutputSink<'_>) {
+        let [n_id, th_id, e_id, map_id, maf_id] = self.inputs;
+        let (Some(map), Some(maf)) = (signals.get(map_id), signals.get(maf_id)) else {
+            return;
+        };
+        // A segment is complete when MAP and MAF carry the same, newer time stamp.
+        if map.t_ns != maf.t_ns
+            || map.t_ns > now_ns
+            || self.last_t_ns.is_some_and(|t| map.t_ns <= t)
+        {
+            return;
+        }
+        let (Some(n), Some(th), Some(e)) =
+            (signals.get(n_id), signals.get(th_id), signals.get(e_id))
+        else {
+            return;
+        };
+        self.last_t_ns = Some(map.t_ns);
+        let seg = Segment {
+            speed_rpm: n.value,
+            throttle_deg: th.value,
+            egr_cmd: e.value,
+            map_pa: map.value,
+            maf_kg_s: maf.value,
+        };
+        self.process_segment(map.t_ns, &seg, out);
+    }
+
+    fn start_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
+        let mut sink = |e: DiagnosticEvent| out(Output::Event(&e));
+        let _ = self
+            .memory
+            .start_operation_cycle(now_ns as f64 * 1e-9, &mut sink);
+        self.reset_cycle_state();
+    }
+
+    fn end_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
+        let mut sink = |e: DiagnosticEvent| out(Output::Event(&e));
+        let _ = self
+            .memory
+            .end_operation_cycle(now_ns as f64 * 1e-9, &mut sink);
+    }
+}
