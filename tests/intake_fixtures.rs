@@ -414,3 +414,22 @@ fn bad_input_is_refused_without_nan_or_panic() {
         .iter()
         .all(|v| v.is_finite()));
 }
+
+/// The `[monitor]` table of the embedded config/intake.toml states the defaults, so the file
+/// documents what runs; an unknown key there is an error naming it.
+#[test]
+fn embedded_monitor_table_is_the_default_and_unknown_keys_are_refused() {
+    let c = fdd::config::IntakeConfig::load(None).expect("embedded config");
+    assert_eq!(c.monitor, IntakeMonitorConfig::default());
+    let text = format!(
+        "{}\nisolation_margni = 3.0\n",
+        fdd::config::DEFAULT_INTAKE_TOML
+    );
+    let err = fdd::config::IntakeConfig::parse(&text, "bad.toml")
+        .expect_err("unknown key")
+        .to_string();
+    assert!(
+        err.contains("bad.toml") && err.contains("isolation_margni"),
+        "{err}"
+    );
+}

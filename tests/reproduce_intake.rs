@@ -76,3 +76,14 @@ fn cli_prints_the_table_and_rejects_bad_settings() {
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("egr"));
 }
+
+/// The reproduction's filter settings are the intake monitor's defaults, so the table describes
+/// the filters the monitor runs.
+#[test]
+fn reproduction_uses_the_monitor_filter_settings() {
+    use fdd::reproduce::intake::{FEDERATED_SHARES, P0_STD_REL, Q_STD};
+    let m = fdd_monitor::intake::IntakeMonitorConfig::default();
+    assert_eq!(m.q_std, Q_STD);
+    assert_eq!(m.p0_std, P0_STD_REL);
+    assert_eq!(m.federated_shares, FEDERATED_SHARES);
+}
