@@ -87,3 +87,32 @@ fn intake_monitor_segment(bencher: Bencher, speed: u32) {
         mon.process_segment(*t + k as u64, divan::black_box(s), &mut sink);
     });
 }
+
+/// The one-off cost of opening an isolation episode with the longest look-back the monitor
+/// allows: 256 recorded segments refitted into the onset scan's 16 banks.
+#[divan::bench(sample_count = 200, sample_size = 16)]
+fn intake_alarm_refit_256_segments(bencher: Bencher) {
+    use fdd_monitor::intake::{OnsetScan, SegmentRecord};
+    let records: Vec<SegmentRecord> = (0..256)
+        .map(|k| SegmentRecord {
+            z_p: (k as f64 * 0.37).sin() * 3.0,
+            s_p: 800.0,
+            z_w: (k as f64 * 0.11).cos(),
+            s_w: 3e-4,
+            map_flow_gain: -2e-8,
+            decay: 0.85,
+            input_gain: 3.5e5,
+            maf: 0.02,
+            egr_full: 0.011,
+            egr_cmd: if k % 50 < 25 { 0.0 } else { 0.3 },
+            leak_unit: 240.0,
+        })
+        .collect();
+    bencher.bench_local(|| {
+        let mut scan = OnsetScan::new(0, 255);
+        for (k, r) in records.iter().enumerate() {
+            scan.push(k as u64, divan::black_box(r));
+        }
+        divan::black_box(scan.ranked())
+    });
+}

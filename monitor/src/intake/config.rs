@@ -88,6 +88,10 @@ pub struct IntakeMonitorConfig {
     pub throttle_cusum_min_bias_sigma: f64,
     pub throttle_cusum_threshold: f64,
     pub choked_ratio: f64,
+    /// The isolation bank's throttle-flow residual (MAF against the nozzle flow at the MAP
+    /// reading) is used while the MAP reading is below `flow_ratio_max * p_a`; nearer ambient
+    /// the flow function is too steep for a MAP error to act on it linearly.
+    pub flow_ratio_max: f64,
     /// Relative uncertainty of the throttle flow model (-), added to the throttle-model
     /// residual's variance.
     pub throttle_model_rel: f64,
@@ -146,6 +150,7 @@ impl Default for IntakeMonitorConfig {
             throttle_cusum_min_bias_sigma: 2.0,
             throttle_cusum_threshold: 40.0,
             choked_ratio: 0.5,
+            flow_ratio_max: 0.9,
             throttle_model_rel: 0.01,
             nis_window: 50,
             nis_cap: 50.0,

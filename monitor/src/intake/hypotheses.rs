@@ -9,9 +9,12 @@
 //!   MAF-local filter never sees the MAP: its manifold pressure is the model driven by the
 //!   metered air. Any unmetered or mis-metered air makes the true pressure drift away from it
 //!   along the manifold's own dynamics, and a MAP sensor error shows directly;
-//! - **throttle flow** `z_w = (MAF - throttle nozzle flow at the commanded opening) /
-//!   sqrt(S_w)`, only in segments where the throttle is choked (its flow then depends on the
-//!   opening alone): sensitive to the MAF sensor only.
+//! - **throttle flow** `z_w = (MAF - throttle nozzle flow at the commanded opening and the MAP
+//!   reading, lagged like the MAF) / sqrt(S_w)`: sensitive to the MAF sensor, and to the MAP
+//!   sensor through the flow's pressure slope `dW/dp` (zero while the throttle is choked), but
+//!   not to the EGR or a leak, which move the true pressure and the true throttle flow
+//!   together. `S_w` includes `(dW/dp sigma_MAP)^2`, so near ambient, where the slope is steep,
+//!   the channel weighs nothing.
 //!
 //! How each fault moves them (`delta` = the pressure error's response through the linearized
 //! manifold dynamics, `d delta/dt = j delta + R T / V u`, discretized per segment as
@@ -19,7 +22,7 @@
 //!
 //! | hypothesis | parameter | `z_p * sqrt(S_p)` | `z_w * sqrt(S_w)` |
 //! |---|---|---|---|
-//! | MAP sensor bias | `b` (Pa) | `b` (immediately, no dynamics) | 0 |
+//! | MAP sensor bias | `b` (Pa) | `b` (immediately, no dynamics) | `-dW/dp b` |
 //! | MAF sensor gain | `g - 1` | `delta` of `u = -MAF` (the filter's air is `g` times too much) | `(g - 1) MAF` |
 //! | EGR valve stuck at `s` | `s` in `[0, 1]` | `delta` of `u = W_egr1 (s - e_cmd)` | 0 |
 //! | leak | area `A >= 0` (m^2) | `delta` of `u = W_orifice1 A` | 0 |
@@ -86,10 +89,14 @@ pub struct SegmentRecord {
     pub z_p: f64,
     /// Its standard deviation `sqrt(S_p)` (Pa).
     pub s_p: f64,
-    /// Normalized throttle-flow residual (-), NaN when the throttle is not choked.
+    /// Normalized throttle-flow residual (-): MAF against the throttle flow at the MAP reading,
+    /// NaN when there is none.
     pub z_w: f64,
     /// Its standard deviation (kg/s).
     pub s_w: f64,
+    /// Throttle flow change per Pa of MAP error, lagged like the MAF (kg/s/Pa): the MAP bias's
+    /// signature in the flow residual.
+    pub map_flow_gain: f64,
     /// Manifold pressure-error decay over the segment, `e^{j dt}` (-).
     pub decay: f64,
     /// Pressure change per unit inflow over the segment, `R T / V dt phi1(j dt)` (Pa s/kg).
@@ -175,10 +182,13 @@ impl HypothesisBank {
         }
         if r.z_w.is_finite() && r.s_w > 0.0 {
             let z = r.z_w;
-            let g = r.maf / r.s_w;
+            let g_map = -r.map_flow_gain / r.s_w;
+            let g_maf = r.maf / r.s_w;
             self.szz += z * z;
-            self.sgg[1] += g * g;
-            self.sgz[1] += g * z;
+            self.sgg[0] += g_map * g_map;
+            self.sgz[0] += g_map * z;
+            self.sgg[1] += g_maf * g_maf;
+            self.sgz[1] += g_maf * z;
         }
     }
 
@@ -240,6 +250,68 @@ impl HypothesisBank {
     /// The fit of one hypothesis.
     pub fn fit(&self, fault: IntakeFault) -> Fit {
         self.fits()[fault.index()]
+    }
+}
+
+/// Candidate onsets scanned by [`OnsetScan`].
+pub const ONSETS: usize = 16;
+
+/// The bank fitted from several candidate onsets at once (the generalized likelihood ratio with
+/// an unknown change time). The test that raised the alarm bounds the onset: it is before the
+/// alarm, and after the last time the test's CUSUM was zero, less a few segments. That bound is
+/// loose (a CUSUM fed with slightly biased residuals can stay above zero for a long time), and a
+/// bank started at the wrong time misreads the fault: started late, on a fault that builds up
+/// along the manifold dynamics, it takes the rise already present for a step (a MAP bias). The
+/// scan starts one bank at each of [`ONSETS`] onsets spread evenly over the bounds and takes,
+/// for each hypothesis, its best statistic over the onsets.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct OnsetScan {
+    banks: [HypothesisBank; ONSETS],
+    onsets: [u64; ONSETS],
+}
+
+impl OnsetScan {
+    /// A scan over onsets from `earliest` to `latest` (segment indices, inclusive).
+    pub fn new(earliest: u64, latest: u64) -> Self {
+        let latest = latest.max(earliest);
+        let span = (latest - earliest) as f64;
+        let mut onsets = [earliest; ONSETS];
+        for (j, o) in onsets.iter_mut().enumerate() {
+            *o = earliest + (span * j as f64 / (ONSETS - 1) as f64).round() as u64;
+        }
+        Self {
+            banks: [HypothesisBank::new(); ONSETS],
+            onsets,
+        }
+    }
+
+    /// The earliest candidate onset (segment index).
+    pub fn earliest_onset(&self) -> u64 {
+        self.onsets[0]
+    }
+
+    /// Adds segment `k` to every bank whose onset is at or before it.
+    pub fn push(&mut self, k: u64, r: &SegmentRecord) {
+        for (bank, &onset) in self.banks.iter_mut().zip(&self.onsets) {
+            if k >= onset {
+                bank.push(r);
+            }
+        }
+    }
+
+    /// For each hypothesis its best fit over the candidate onsets, sorted by decreasing
+    /// statistic.
+    pub fn ranked(&self) -> [Fit; HYPOTHESES] {
+        let mut best = self.banks[0].fits();
+        for bank in &self.banks[1..] {
+            for (b, f) in best.iter_mut().zip(bank.fits()) {
+                if f.glr > b.glr {
+                    *b = f;
+                }
+            }
+        }
+        best.sort_unstable_by(|a, b| b.glr.total_cmp(&a.glr));
+        best
     }
 }
 
@@ -305,6 +377,7 @@ mod tests {
             s_p: 800.0,
             z_w,
             s_w: 3e-4,
+            map_flow_gain: -2e-8,
             decay: 0.85,
             input_gain: 3.5e5,
             maf,
@@ -329,7 +402,7 @@ mod tests {
             d_leak = r.decay * d_leak + r.input_gain * r.leak_unit;
             let choked = k % 2 == 0;
             let (p, w) = match fault {
-                IntakeFault::MapSensor => (theta, 0.0),
+                IntakeFault::MapSensor => (theta, -r.map_flow_gain * theta),
                 IntakeFault::MafSensor => (theta * d_maf, theta * maf),
                 IntakeFault::EgrValve => (d_e, 0.0),
                 IntakeFault::Leak => (theta * d_leak, 0.0),
@@ -385,6 +458,46 @@ mod tests {
         assert_eq!(leak.parameter, 0.0);
         let egr = bank.fit(IntakeFault::EgrValve);
         assert!((0.0..=1.0).contains(&egr.parameter));
+    }
+
+    /// A fault that builds up along the manifold dynamics, seen from an onset estimate that is
+    /// late (partway up the rise): a single bank started there misfits it, the onset scan finds
+    /// the true onset, the right hypothesis and its exact size.
+    #[test]
+    fn onset_scan_recovers_a_late_onset_estimate() {
+        let true_onset = 40u64;
+        let mut records = Vec::new();
+        let mut d_leak = 0.0;
+        for k in 0..120u64 {
+            // Operating point moving, so the flow hypotheses' shapes differ.
+            let mut r = record(0.0, f64::NAN, 0.01 + 0.0005 * (k % 30) as f64, 0.0);
+            r.leak_unit = if (k / 15) % 2 == 0 { 240.0 } else { 120.0 };
+            if k >= true_onset {
+                d_leak = r.decay * d_leak + r.input_gain * r.leak_unit;
+            }
+            r.z_p = 7.07e-6 * d_leak / r.s_p;
+            records.push(r);
+        }
+        let late = true_onset + 6;
+        let mut single = HypothesisBank::new();
+        for r in &records[late as usize..] {
+            single.push(r);
+        }
+        // Started late, the bank misreads the rise: the leak's size comes out wrong.
+        let single_leak = single.fit(IntakeFault::Leak);
+        assert!(
+            (single_leak.parameter - 7.07e-6).abs() > 1e-3 * 7.07e-6,
+            "{single_leak:?}"
+        );
+        let mut scan = OnsetScan::new(late - 15, late);
+        assert!(scan.earliest_onset() <= true_onset);
+        for (k, r) in records.iter().enumerate() {
+            scan.push(k as u64, r);
+        }
+        let ranked = scan.ranked();
+        assert_eq!(ranked[0].fault, IntakeFault::Leak, "{ranked:?}");
+        assert!((ranked[0].parameter - 7.07e-6).abs() < 1e-9 * 7.07e-6);
+        assert!(ranked[0].glr > single_leak.glr);
     }
 
     #[test]

@@ -56,13 +56,20 @@ use fdd_estimators::{DecentralizedPair, Ekf, FederatedFilter, FusionNoise};
 use nalgebra::{Matrix1, Matrix2, SMatrix, SVector, Vector1, Vector2};
 
 pub use config::{IntakeMonitorConfig, PrimaryFilter};
-pub use hypotheses::{Fit, HypothesisBank, IntakeFault, RecordRing, SegmentRecord, ALL_FAULTS};
+pub use hypotheses::{
+    Fit, HypothesisBank, IntakeFault, OnsetScan, RecordRing, SegmentRecord, ALL_FAULTS,
+};
 
 use crate::monitor::{Monitor, Output, OutputSink};
 use crate::signal_table::{SignalId, SignalTable};
 
 /// Segments kept for refitting from an onset (5 s at 6000 rpm, 38 s at 800 rpm).
 const HISTORY: usize = 1024;
+/// Segments before the alarm test's onset estimate that the onset scan still considers.
+const ONSET_MARGIN: u64 = 6;
+/// Longest look-back of the onset scan (segments): bounds the one-off refit at an alarm to
+/// `ONSET_WINDOW_MAX` records into 16 banks (1.3 s at 6000 rpm, 9.6 s at 800 rpm).
+const ONSET_WINDOW_MAX: u64 = 256;
 /// Capacity of the NIS windows.
 const NIS_RING: usize = 512;
 /// Segments the throttle must have been choked before its flow residual is used (the MAF lag
@@ -249,8 +256,6 @@ impl NisWindow {
 #[derive(Debug, Clone, Copy)]
 struct Episode {
     alarm_s: f64,
-    /// The residual test that opened it.
-    result: TestResult,
     cmd_sum: f64,
     segments: u64,
 }
@@ -285,7 +290,9 @@ pub struct IntakeMonitor {
     skipped: u64,
     rejected: u64,
     w_model_lag: f64,
+    dw_dp_lag: f64,
     choked_run: u32,
+    flow_run: u32,
     cusum_p: OnsetCusum,
     cusum_x: OnsetCusum,
     cusum_t: OnsetCusum,
@@ -296,7 +303,10 @@ pub struct IntakeMonitor {
     maf_low_run: u32,
     maf_high_run: u32,
     history: RecordRing,
-    bank: HypothesisBank,
+    scan: OnsetScan,
+    /// The isolation's state this segment: PreFailed while an episode is open (value: the lead
+    /// of the best hypothesis over the runner-up), Failed when it names a fault.
+    isolation: TestResult,
     episode: Option<Episode>,
     decided: Option<IntakeDecision>,
     deciding: TestResult,
@@ -335,6 +345,7 @@ impl IntakeMonitor {
             ("maf_high_kg_s", cfg.maf_high_kg_s),
             ("clip_sigma", cfg.clip_sigma),
             ("choked_ratio", cfg.choked_ratio),
+            ("flow_ratio_max", cfg.flow_ratio_max),
             ("nis_cap", cfg.nis_cap),
             ("nis_threshold", cfg.nis_threshold),
             ("isolation_min_glr", cfg.isolation_min_glr),
@@ -421,7 +432,9 @@ impl IntakeMonitor {
             skipped: 0,
             rejected: 0,
             w_model_lag: f64::NAN,
+            dw_dp_lag: 0.0,
             choked_run: 0,
+            flow_run: 0,
             cusum_p: OnsetCusum::new(
                 "pressure_cusum_threshold",
                 cfg.pressure_cusum_min_bias_sigma,
@@ -444,7 +457,8 @@ impl IntakeMonitor {
             maf_low_run: 0,
             maf_high_run: 0,
             history: RecordRing::new(HISTORY),
-            bank: HypothesisBank::new(),
+            scan: OnsetScan::default(),
+            isolation: TestResult::NOT_TESTED,
             episode: None,
             decided: None,
             deciding: TestResult::NOT_TESTED,
@@ -471,7 +485,7 @@ impl IntakeMonitor {
     /// The hypotheses ranked by their statistic, as of the last segment of the current or last
     /// isolation episode.
     pub fn ranked_hypotheses(&self) -> [Fit; 4] {
-        self.bank.ranked()
+        self.scan.ranked()
     }
 
     /// Segments processed, skipped for a refused input or reading, and refused by a filter.
@@ -521,7 +535,8 @@ impl IntakeMonitor {
             pair,
             federated,
         });
-        self.w_model_lag = x0[X_WTHR];
+        self.w_model_lag = f64::NAN;
+        self.flow_run = 0;
         Ok(())
     }
 
@@ -674,7 +689,14 @@ impl IntakeMonitor {
             self.skipped += 1;
         }
 
+        self.isolation = TestResult::NOT_TESTED;
         self.decide(now_s, k, seg, residual_alarm);
+        if self.isolation.verdict != Verdict::NotTested {
+            out(Output::Test {
+                test: "intake_isolation",
+                result: self.isolation,
+            });
+        }
 
         let mut verdicts = [Verdict::NotTested; 9];
         match self.decided {
@@ -759,30 +781,57 @@ impl IntakeMonitor {
         let s_x = (p_map[(X_WMES, X_WMES)] + self.r_maf).sqrt();
         let z_x = (seg.maf_kg_s - x_map[X_WMES]) / s_x;
 
-        // Throttle-model flow residual, used only while choked.
+        // Throttle-model flow residuals. The throttle flow computed at the MAP reading (lagged
+        // like the MAF) depends on the MAF sensor (directly) and on the MAP sensor (through the
+        // pressure ratio), but not on the EGR or a leak, which change the true pressure and the
+        // true throttle flow together. Its variance carries the MAP noise through the flow
+        // function's slope, so the near-ambient region, where that slope is steep, weighs
+        // nothing. The test uses it only while the throttle is choked (then it sees the MAF
+        // alone); the isolation bank uses it everywhere, with the MAP hypothesis's signature.
         let p = self.model.params();
         let p_hat = filters.central.state()[X_PM];
         let dt = IntakeModel::segment_dt(seg.speed_rpm);
-        let w_model = self.model.throttle_flow(p_hat, seg.throttle_deg);
+        let (w_model, dw_dp) = self
+            .model
+            .throttle_flow_area(seg.map_pa, self.model.throttle_area(seg.throttle_deg));
         let a = (-dt / p.maf_time_constant_s).exp();
+        if self.w_model_lag.is_nan() {
+            (self.w_model_lag, self.dw_dp_lag) = (w_model, dw_dp);
+        }
         self.w_model_lag = a * self.w_model_lag + (1.0 - a) * w_model;
+        self.dw_dp_lag = a * self.dw_dp_lag + (1.0 - a) * dw_dp;
         let choked_limit = self.cfg.choked_ratio * p.ambient_pressure_pa;
         let choked = p_hat < choked_limit && seg.map_pa < choked_limit;
         self.choked_run = if choked { self.choked_run + 1 } else { 0 };
+        // Beyond `flow_ratio_max` the flow function is too steep (and ends at ratio 1) for a
+        // MAP error to act linearly on the computed flow: no flow residual there.
+        let in_range = seg.map_pa < self.cfg.flow_ratio_max * p.ambient_pressure_pa;
+        self.flow_run = if in_range { self.flow_run + 1 } else { 0 };
         let s_w = ((self.cfg.maf_noise_rel * seg.maf_kg_s).powi(2)
-            + (self.cfg.throttle_model_rel * self.w_model_lag).powi(2))
+            + (self.cfg.throttle_model_rel * self.w_model_lag).powi(2)
+            + (self.dw_dp_lag * self.cfg.map_noise_pa).powi(2))
         .sqrt();
-        let z_w = if self.choked_run >= CHOKED_SETTLE && s_w > 0.0 {
+        let z_flow = if self.flow_run >= CHOKED_SETTLE && s_w > 0.0 {
             (seg.maf_kg_s - self.w_model_lag) / s_w
         } else {
             f64::NAN
         };
+        let z_w = if self.choked_run >= CHOKED_SETTLE {
+            z_flow
+        } else {
+            f64::NAN
+        };
 
-        // Linearized manifold response over this segment (for the hypothesis bank).
+        // Linearized manifold response over this segment (for the hypothesis bank). The flows
+        // a leak or the EGR would add are evaluated at the MAP-only local filter's pressure: it
+        // follows the true pressure under every fault but the MAP sensor's, whereas the
+        // centralized estimate is pulled off it by the very inconsistency being isolated (and
+        // near ambient those flows change fast with the pressure).
+        let p_true = x_map[X_PM];
         let (slope, _) = self.model.vol_eff(seg.speed_rpm);
         let egr_area = self.model.egr_area(seg.egr_cmd);
         let d_egr = if egr_area > 0.0 {
-            self.model.egr_flow_area(p_hat, egr_area).1
+            self.model.egr_flow_area(p_true, egr_area).1
         } else {
             0.0
         };
@@ -791,18 +840,19 @@ impl IntakeMonitor {
         let record = SegmentRecord {
             z_p,
             s_p,
-            z_w,
+            z_w: z_flow,
             s_w,
+            map_flow_gain: self.dw_dp_lag,
             decay: z.exp(),
             input_gain: self.gain * dt * phi1(z),
             maf: seg.maf_kg_s,
-            egr_full: self.model.egr_flow_area(p_hat, p.egr_max_area_m2).0,
+            egr_full: self.model.egr_flow_area(p_true, p.egr_max_area_m2).0,
             egr_cmd: seg.egr_cmd,
-            leak_unit: self.model.throttle_flow_area(p_hat, 1.0).0,
+            leak_unit: self.model.throttle_flow_area(p_true, 1.0).0,
         };
         self.history.push(record);
         if self.episode.is_some() {
-            self.bank.push(&record);
+            self.scan.push(k, &record);
         }
 
         let clip = self.cfg.clip_sigma;
@@ -878,19 +928,24 @@ impl IntakeMonitor {
             }
         }
         if self.episode.is_none() {
-            if let Some((result, onset)) = residual_alarm {
-                // Refit the bank from the onset.
-                let back = (k + 1).saturating_sub(onset.max(1)) as usize;
-                self.bank.reset();
+            if let Some((_result, onset)) = residual_alarm {
+                // Refit the hypotheses from the candidate onsets back from the estimate.
+                let earliest = onset
+                    .saturating_sub(ONSET_MARGIN)
+                    .max(k.saturating_sub(ONSET_WINDOW_MAX))
+                    .max(1);
+                self.scan = OnsetScan::new(earliest, k);
+                let first = self.scan.earliest_onset();
+                let back = (k + 1).saturating_sub(first) as usize;
+                let held = back.min(self.history.len()) as u64;
                 let (mut cmd_sum, mut n) = (0.0, 0u64);
-                for r in self.history.last(back) {
-                    self.bank.push(r);
+                for (i, r) in self.history.last(back).enumerate() {
+                    self.scan.push(k + 1 - held + i as u64, r);
                     cmd_sum += r.egr_cmd;
                     n += 1;
                 }
                 self.episode = Some(Episode {
                     alarm_s: now_s,
-                    result,
                     cmd_sum,
                     segments: n,
                 });
@@ -904,14 +959,19 @@ impl IntakeMonitor {
         ep.cmd_sum += seg.egr_cmd;
         ep.segments += 1;
         self.episode = Some(ep);
-        let ranked = self.bank.ranked();
+        let ranked = self.scan.ranked();
         let elapsed = now_s - ep.alarm_s;
         let best = ranked[0];
         let significant = best.glr >= self.cfg.isolation_min_glr;
         let clear = best.glr - ranked[1].glr >= self.cfg.isolation_margin;
-        if elapsed >= self.cfg.isolation_min_s && significant && clear
-            || elapsed >= self.cfg.isolation_max_s && significant
-        {
+        self.isolation = TestResult {
+            value: best.glr - ranked[1].glr,
+            min: 0.0,
+            max: self.cfg.isolation_margin,
+            verdict: Verdict::PreFailed,
+        };
+        if elapsed >= self.cfg.isolation_min_s && significant && clear {
+            self.isolation.verdict = Verdict::Failed;
             let total: f64 = ranked
                 .iter()
                 .map(|f| f.glr.max(0.0))
@@ -939,7 +999,6 @@ impl IntakeMonitor {
                 max: self.cfg.isolation_min_glr,
                 verdict: Verdict::Failed,
             };
-            let _first = ep.result;
             self.decided = Some(IntakeDecision::Residual { fit: best, event });
             self.episode = None;
             tracing::debug!(
@@ -949,10 +1008,14 @@ impl IntakeMonitor {
                 glr = best.glr,
                 "intake fault isolated"
             );
-        } else if elapsed >= self.cfg.isolation_max_s {
+        } else if elapsed >= self.cfg.isolation_max_s && !significant {
             // Unexplained alarm: no hypothesis is significant. Close the episode.
             self.episode = None;
+            self.isolation.verdict = Verdict::Passed;
         }
+        // Significant but ambiguous (two faults explain the data equally well, e.g. a leak and
+        // an EGR valve stuck open while the EGR command does not move): no DTC is named; the
+        // episode goes on until the driving separates them.
     }
 
     fn report_estimate(&self, seg: &Segment, out: &mut OutputSink<'_>) {
@@ -991,7 +1054,7 @@ impl IntakeMonitor {
         self.decided = None;
         self.deciding = TestResult::NOT_TESTED;
         self.episode = None;
-        self.bank.reset();
+        self.scan = OnsetScan::default();
         self.history.clear();
         self.cusum_p.reset();
         self.cusum_x.reset();
