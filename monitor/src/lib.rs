@@ -8,6 +8,7 @@
 pub mod intake;
 pub mod log;
 pub mod monitor;
+pub mod monitor_events;
 pub mod scheduler;
 pub mod signal_table;
 pub mod throttle;

@@ -43,10 +43,6 @@ pub mod config;
 pub mod hypotheses;
 
 use fdd_diagnostics::detectors::{two_sided_arl, Cusum, CusumConfig, CusumSide, Detector};
-use fdd_diagnostics::dtc::{
-    DebounceConfig, EventConfig, EventId, EventMemory, EventMemoryConfig, MilConfig, ReportContext,
-};
-use fdd_diagnostics::event::DiagnosticEvent;
 use fdd_diagnostics::{TestResult, Verdict};
 use fdd_estimators::models::intake::{
     IntakeInput, IntakeModel, IntakeState, MafSensor, MapMafSensors, MapSensor, ThrottleFlow, X_PM,
@@ -61,6 +57,7 @@ pub use hypotheses::{
 };
 
 use crate::monitor::{Monitor, Output, OutputSink};
+use crate::monitor_events::{EventSpec, MonitorEvents};
 use crate::signal_table::{SignalId, SignalTable};
 
 /// Segments kept for refitting from an onset (5 s at 6000 rpm, 38 s at 800 rpm).
@@ -311,9 +308,7 @@ pub struct IntakeMonitor {
     decided: Option<IntakeDecision>,
     deciding: TestResult,
     candidates: [(&'static str, f64); 4],
-    memory: EventMemory,
-    event_ids: [EventId; 9],
-    statuses: [u8; 9],
+    events: MonitorEvents,
 }
 
 impl IntakeMonitor {
@@ -382,44 +377,27 @@ impl IntakeMonitor {
             .map_err(|reason| setting("model", reason))?;
         let p = model.params();
         let q_std = SVector::<f64, 6>::from(cfg.q_std);
-        let events = EVENT_NAMES
+        let dtcs = [
+            &cfg.dtc_map_performance,
+            &cfg.dtc_map_low,
+            &cfg.dtc_map_high,
+            &cfg.dtc_maf_performance,
+            &cfg.dtc_maf_low,
+            &cfg.dtc_maf_high,
+            &cfg.dtc_egr_insufficient,
+            &cfg.dtc_egr_excessive,
+            &cfg.dtc_leak,
+        ];
+        let specs: Vec<EventSpec<'_>> = EVENT_NAMES
             .iter()
-            .zip([
-                &cfg.dtc_map_performance,
-                &cfg.dtc_map_low,
-                &cfg.dtc_map_high,
-                &cfg.dtc_maf_performance,
-                &cfg.dtc_maf_low,
-                &cfg.dtc_maf_high,
-                &cfg.dtc_egr_insufficient,
-                &cfg.dtc_egr_excessive,
-                &cfg.dtc_leak,
-            ])
-            .map(|(name, dtc)| EventConfig {
-                name: name.to_string(),
-                dtc: dtc.clone(),
+            .zip(dtcs)
+            .map(|(name, dtc)| EventSpec {
+                name,
+                dtc,
                 priority: 2,
-                // The monitor qualifies its own results (persistence and isolation).
-                debounce: DebounceConfig::MonitorInternal,
-                confirmation_threshold: 2,
-                aging_threshold: 40,
-                mil: MilConfig::default(),
-                freeze_frame: Vec::new(),
-                freeze_frame_update: Default::default(),
             })
             .collect();
-        let memory = EventMemory::new(&EventMemoryConfig {
-            capacity: 8,
-            events,
-        })?;
-        let mut event_ids = [memory
-            .event_id(EVENT_NAMES[0])
-            .ok_or_else(|| setting("dtc", "event missing"))?; 9];
-        for (i, name) in EVENT_NAMES.iter().enumerate() {
-            event_ids[i] = memory
-                .event_id(name)
-                .ok_or_else(|| setting("dtc", "event missing"))?;
-        }
+        let events = MonitorEvents::new(&specs)?;
         let mut monitor = Self {
             period_ns: (cfg.poll_period_s * 1e9).round().max(1.0) as u64,
             q: SMatrix::from_diagonal(&q_std.component_mul(&q_std)),
@@ -463,9 +441,7 @@ impl IntakeMonitor {
             decided: None,
             deciding: TestResult::NOT_TESTED,
             candidates: [("", 0.0); 4],
-            statuses: [0x50; 9],
-            memory,
-            event_ids,
+            events,
             inputs,
             model,
             cfg: cfg.clone(),
@@ -541,38 +517,17 @@ impl IntakeMonitor {
     }
 
     fn report_all(&mut self, now_s: f64, verdicts: [Verdict; 9], out: &mut OutputSink<'_>) {
-        let named = self.decided.is_some();
-        for (i, &verdict) in verdicts.iter().enumerate() {
-            let result = if verdict == Verdict::Failed {
-                self.deciding
-            } else {
-                TestResult {
-                    value: 0.0,
-                    min: 0.0,
-                    max: 0.0,
-                    verdict,
-                }
-            };
-            let cands = self.candidates;
-            let ctx = if named && verdict == Verdict::Failed {
-                ReportContext::at(now_s).with_candidates(&cands)
-            } else {
-                ReportContext::at(now_s)
-            };
-            let mut sink = |e: DiagnosticEvent| out(Output::Event(&e));
-            if let Ok(status) = self
-                .memory
-                .report(self.event_ids[i], &result, &ctx, &mut sink)
-            {
-                if status.byte() != self.statuses[i] {
-                    self.statuses[i] = status.byte();
-                    out(Output::DtcStatus {
-                        dtc: self.memory.dtc(self.event_ids[i]),
-                        status,
-                    });
-                }
-            }
-        }
+        let n = if self.decided.is_some() {
+            self.candidates
+                .iter()
+                .take_while(|c| !c.0.is_empty())
+                .count()
+        } else {
+            0
+        };
+        let candidates = self.candidates;
+        self.events
+            .report(now_s, &verdicts, &self.deciding, &candidates[..n], out);
     }
 
     /// Circuit range check of one reading: updates the run counters and says whether the
@@ -1121,17 +1076,11 @@ impl Monitor for IntakeMonitor {
     }
 
     fn start_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
-        let mut sink = |e: DiagnosticEvent| out(Output::Event(&e));
-        let _ = self
-            .memory
-            .start_operation_cycle(now_ns as f64 * 1e-9, &mut sink);
+        self.events.start_operation_cycle(now_ns, out);
         self.reset_cycle_state();
     }
 
     fn end_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
-        let mut sink = |e: DiagnosticEvent| out(Output::Event(&e));
-        let _ = self
-            .memory
-            .end_operation_cycle(now_ns as f64 * 1e-9, &mut sink);
+        self.events.end_operation_cycle(now_ns, out);
     }
 }

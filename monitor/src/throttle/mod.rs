@@ -33,10 +33,6 @@
 pub mod config;
 
 use fdd_diagnostics::detectors::{two_sided_arl, Cusum, CusumConfig};
-use fdd_diagnostics::dtc::{
-    DebounceConfig, EventConfig, EventId, EventMemory, EventMemoryConfig, MilConfig, ReportContext,
-};
-use fdd_diagnostics::event::DiagnosticEvent;
 use fdd_diagnostics::{TestResult, Verdict};
 use fdd_estimators::models::throttle::{PositionAndWattmeter, PositionSensor, ThrottleModel};
 use fdd_estimators::reacquire::Reacquire;
@@ -46,6 +42,7 @@ use nalgebra::{Matrix1, Matrix2, Matrix3, Vector1, Vector2, Vector3};
 pub use config::ThrottleMonitorConfig;
 
 use crate::monitor::{Monitor, Output, OutputSink};
+use crate::monitor_events::{EventSpec, MonitorEvents};
 use crate::signal_table::{SignalId, SignalTable};
 
 /// Capacity of the fixed rings (NIS window, motion window, dropout times).
@@ -219,9 +216,7 @@ pub struct ThrottleMonitor {
     first_result: TestResult,
     tps_failed: bool,
     watt_failed: bool,
-    memory: EventMemory,
-    event_ids: [EventId; 7],
-    statuses: [u8; 7],
+    events: MonitorEvents,
 }
 
 impl ThrottleMonitor {
@@ -318,35 +313,17 @@ impl ThrottleMonitor {
             &cfg.dtc_wattmeter,
             &cfg.dtc_position_fallback,
         ];
-        let events = EVENT_NAMES
+        let specs: Vec<EventSpec<'_>> = EVENT_NAMES
             .iter()
             .zip(dtcs)
             .enumerate()
-            .map(|(i, (name, dtc))| EventConfig {
-                name: name.to_string(),
-                dtc: dtc.clone(),
+            .map(|(i, (name, dtc))| EventSpec {
+                name,
+                dtc,
                 priority: if i < 4 { 2 } else { 3 },
-                // The monitor qualifies its own results (persistence and decision window).
-                debounce: DebounceConfig::MonitorInternal,
-                confirmation_threshold: 2,
-                aging_threshold: 40,
-                mil: MilConfig::default(),
-                freeze_frame: Vec::new(),
-                freeze_frame_update: Default::default(),
             })
             .collect();
-        let memory = EventMemory::new(&EventMemoryConfig {
-            capacity: 8,
-            events,
-        })?;
-        let mut event_ids = [memory
-            .event_id(EVENT_NAMES[0])
-            .ok_or_else(|| setting("dtc", "event missing"))?; 7];
-        for (i, name) in EVENT_NAMES.iter().enumerate() {
-            event_ids[i] = memory
-                .event_id(name)
-                .ok_or_else(|| setting("dtc", "event missing"))?;
-        }
+        let events = MonitorEvents::new(&specs)?;
         Ok(Self {
             period_ns: (cfg.period_s * 1e9).round() as u64,
             volts_per_deg: tps_full_scale_v / tps_full_scale_deg,
@@ -385,9 +362,7 @@ impl ThrottleMonitor {
             first_result: TestResult::NOT_TESTED,
             tps_failed: false,
             watt_failed: false,
-            statuses: [0x50; 7],
-            memory,
-            event_ids,
+            events,
             inputs,
             model,
             cfg: cfg.clone(),
@@ -405,40 +380,13 @@ impl ThrottleMonitor {
     }
 
     fn report_all(&mut self, now_s: f64, verdicts: [Verdict; 7], out: &mut OutputSink<'_>) {
-        let candidate = self.decided.map(|f| f.name());
-        for (i, &verdict) in verdicts.iter().enumerate() {
-            // A failed event carries the test result that qualified the fault; other reports
-            // carry only their verdict (the tests' statistics are on their own outputs).
-            let result = if verdict == Verdict::Failed {
-                self.deciding
-            } else {
-                TestResult {
-                    value: 0.0,
-                    min: 0.0,
-                    max: 0.0,
-                    verdict,
-                }
-            };
-            let cands: [(&str, f64); 1] = [(candidate.unwrap_or(""), 1.0)];
-            let ctx = if candidate.is_some() && verdict == Verdict::Failed {
-                ReportContext::at(now_s).with_candidates(&cands)
-            } else {
-                ReportContext::at(now_s)
-            };
-            let mut sink = |e: DiagnosticEvent| out(Output::Event(&e));
-            if let Ok(status) = self
-                .memory
-                .report(self.event_ids[i], &result, &ctx, &mut sink)
-            {
-                if status.byte() != self.statuses[i] {
-                    self.statuses[i] = status.byte();
-                    out(Output::DtcStatus {
-                        dtc: self.memory.dtc(self.event_ids[i]),
-                        status,
-                    });
-                }
-            }
-        }
+        // A failed event carries the test result that qualified the fault and the candidate;
+        // other reports carry only their verdict (the tests' statistics are on their own
+        // outputs).
+        let candidate = self.decided.map(|f| [(f.name(), 1.0)]);
+        let candidates: &[(&str, f64)] = candidate.as_ref().map_or(&[], |c| c);
+        self.events
+            .report(now_s, &verdicts, &self.deciding, candidates, out);
     }
 
     fn classify(&self) -> ThrottleFault {
@@ -702,10 +650,7 @@ impl Monitor for ThrottleMonitor {
     }
 
     fn start_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
-        let mut sink = |e: DiagnosticEvent| out(Output::Event(&e));
-        let _ = self
-            .memory
-            .start_operation_cycle(now_ns as f64 * 1e-9, &mut sink);
+        self.events.start_operation_cycle(now_ns, out);
         // A new cycle starts from the TPS again (see the recovery policy).
         self.tps_ukf = self.tps_ukf_init.clone();
         self.both_ukf = self.both_ukf_init.clone();
@@ -724,9 +669,6 @@ impl Monitor for ThrottleMonitor {
     }
 
     fn end_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
-        let mut sink = |e: DiagnosticEvent| out(Output::Event(&e));
-        let _ = self
-            .memory
-            .end_operation_cycle(now_ns as f64 * 1e-9, &mut sink);
+        self.events.end_operation_cycle(now_ns, out);
     }
 }
