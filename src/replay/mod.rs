@@ -39,8 +39,8 @@ pub mod problems;
 mod sinks;
 pub mod staleness;
 pub mod summary;
+mod truth;
 
-use std::borrow::Cow;
 use std::cell::{Cell, RefCell};
 use std::fs::File;
 use std::io::{BufWriter, IsTerminal};
@@ -56,7 +56,6 @@ use fdd_monitor::monitor::{Monitor, OutputSink};
 use fdd_monitor::scheduler::Scheduler;
 use fdd_monitor::signal_table::{SignalId, SignalTable};
 use indicatif::{ProgressBar, ProgressStyle};
-use serde::Deserialize;
 
 pub use config::RuntimeConfig;
 pub use problems::{Problem, ProblemKind};
@@ -279,15 +278,6 @@ impl Monitor for Timed {
         self.clock.set(now_ns);
         self.inner.borrow_mut().end_operation_cycle(now_ns, out);
     }
-}
-
-/// The fault fields every truth message carries, borrowed (no allocation). The true value is
-/// read separately from the configured field.
-#[derive(Deserialize)]
-struct TruthMsg<'a> {
-    #[serde(borrow)]
-    fault: Cow<'a, str>,
-    fault_active: bool,
 }
 
 /// A channel, resolved on first sight.
@@ -523,10 +513,16 @@ impl Replayer<'_> {
         }
         if let Some(ti) = ch.truth {
             *truth_messages += 1;
-            match serde_json::from_slice::<TruthMsg<'_>>(msg.data) {
+            let field = &cfg.truth[ti].field;
+            match truth::parse_truth(msg.data, field) {
                 Ok(tm) => {
-                    // A null (NaN) or missing true value only disables the comparison.
-                    sinks.truths[ti].value = msg.field_f64(&cfg.truth[ti].field).unwrap_or(f64::NAN);
+                    // A null (NaN) or missing true value only disables the comparison; a dotted
+                    // field path is looked up the general way.
+                    sinks.truths[ti].value = if field.contains('.') {
+                        msg.field_f64(field).unwrap_or(f64::NAN)
+                    } else {
+                        tm.value
+                    };
                     if tm.fault_active && !*truth_active {
                         sinks.fault_onset(&tm.fault, t);
                     }
