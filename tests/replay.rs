@@ -528,3 +528,51 @@ fn verbosity_chooses_what_fdd_logs_about_itself() {
         .expect("run");
     assert!(text(&rust_log.stderr).contains("replay finished"));
 }
+
+/// The intake fixtures through `fdd replay`'s library entry on the default configuration: the
+/// intake monitor runs (the throttle monitor does not, and its signals are not watched), each
+/// fault raises exactly its DTC, and the summary carries the observable driving time before it
+/// from the truth's `fault_observable`.
+#[test]
+fn intake_fixtures_replay_with_their_dtc() {
+    for (name, dtc) in [
+        ("intake_map_bias", "P0106-64"),
+        ("intake_maf_gain", "P0101-64"),
+        ("intake_egr_stuck_open", "P0402-00"),
+        ("intake_egr_stuck_closed", "P0401-00"),
+        ("intake_leak", "P2279-00"),
+    ] {
+        let s = run_lib(&fixture(name), &ReplayOptions::default());
+        assert!(s.problems.is_empty(), "{name}: {:?}", s.problems);
+        assert_eq!(s.missing_signals().count(), 0, "{name}");
+        let names: Vec<&str> = s.monitors.iter().map(|m| m.name.as_str()).collect();
+        assert!(
+            names.contains(&"intake") && !names.contains(&"throttle"),
+            "{names:?}"
+        );
+        let raised: Vec<String> = s.dtcs_raised().map(|d| d.dtc.to_string()).collect();
+        assert_eq!(raised, vec![dtc.to_string()], "{name}");
+        let truth = s.truth.as_ref().expect("ground truth");
+        assert_eq!(truth.faults.len(), 1, "{name}");
+        let f = &truth.faults[0];
+        let (d, _, at) = f.detected.as_ref().expect("detected");
+        assert_eq!(d.to_string(), dtc);
+        let observable = f
+            .observable_ns
+            .expect("the intake truth reports observability");
+        let wall = at - f.onset_ns as f64 * 1e-9;
+        assert!(
+            observable as f64 * 1e-9 <= wall + 0.05,
+            "{name}: observable {observable} ns of {wall} s"
+        );
+        let e = &truth.estimates[0];
+        assert_eq!(e.estimate, "manifold_pressure");
+        assert!(e.error_all.is_some(), "{name}: pressure estimates compared");
+    }
+    let s = run_lib(&fixture("intake_nominal"), &ReplayOptions::default());
+    assert_eq!(s.dtcs_raised().count(), 0, "{:?}", s.dtcs);
+    let e = s.truth.as_ref().expect("truth").estimates[0]
+        .error_all
+        .expect("compared");
+    assert!(e.std < 1000.0 && e.mean.abs() < 200.0, "{e:?}");
+}

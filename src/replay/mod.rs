@@ -321,6 +321,8 @@ struct Replayer<'c> {
     cycles: u32,
     truth_messages: u64,
     truth_active: bool,
+    /// Time of the previous message of each truth topic, ns.
+    truth_prev_ns: Vec<Option<u64>>,
 }
 
 impl Replayer<'_> {
@@ -475,6 +477,7 @@ impl Replayer<'_> {
             problems,
             truth_messages,
             truth_active,
+            truth_prev_ns,
             ..
         } = self;
         let ch = channels[ci].get_or_insert_with(|| Self::resolve(cfg, msg.channel));
@@ -527,6 +530,10 @@ impl Replayer<'_> {
                         sinks.fault_onset(&tm.fault, t);
                     }
                     *truth_active = tm.fault_active;
+                    if let (Some(obs), Some(prev)) = (tm.fault_observable, truth_prev_ns[ti]) {
+                        sinks.fault_observable(obs && tm.fault_active, t.saturating_sub(prev));
+                    }
+                    truth_prev_ns[ti] = Some(t);
                 }
                 Err(e) => {
                     problems.record(ProblemKind::WrongShape, Some(msg.topic), Some(t), || {
@@ -720,6 +727,7 @@ pub fn replay(
         cycles: 0,
         truth_messages: 0,
         truth_active: false,
+        truth_prev_ns: vec![None; cfg.truth.len()],
     };
 
     let (pb, pb_start) = progress_bar(&reader, opts.progress);

@@ -115,6 +115,9 @@ pub struct FaultOnset {
     pub onset_ns: u64,
     /// The first DTC raised (testFailed 0 -> 1) at or after the onset: (DTC, event, time s).
     pub detected: Option<(Dtc, String, f64)>,
+    /// Log time during which the truth said the fault was observable (`fault_observable`), from
+    /// the onset to the detection (or the end), ns; `None` when the truth does not say.
+    pub observable_ns: Option<u64>,
 }
 
 /// The comparison of one estimate with its ground truth.
@@ -352,6 +355,17 @@ impl Sinks {
         self.write_out(EVENTS_TOPIC, t_ns, || ev);
     }
 
+    /// The truth says whether the active faults are observable over the `dt_ns` that ends with
+    /// this sample: adds it to every fault not yet detected.
+    pub fn fault_observable(&mut self, observable: bool, dt_ns: u64) {
+        for f in self.onsets.iter_mut().filter(|f| f.detected.is_none()) {
+            let acc = f.observable_ns.get_or_insert(0);
+            if observable {
+                *acc += dt_ns;
+            }
+        }
+    }
+
     /// A truth fault became active at `t_ns` (first time for this name).
     pub fn fault_onset(&mut self, fault: &str, t_ns: u64) {
         if self.onsets.iter().any(|f| f.fault == fault) {
@@ -366,6 +380,7 @@ impl Sinks {
             fault: fault.to_string(),
             onset_ns: t_ns,
             detected: None,
+            observable_ns: None,
         });
     }
 

@@ -324,13 +324,18 @@ impl ReplaySummary {
                     "  no fault active in the log: every DTC raised is a false alarm"
                 )?;
             } else {
-                let mut t = Table::new(&[
+                let observable = tr.faults.iter().any(|f| f.observable_ns.is_some());
+                let mut header = vec![
                     "fault",
                     "onset (s)",
                     "first DTC after onset",
                     "at (s)",
                     "detection delay (ms)",
-                ]);
+                ];
+                if observable {
+                    header.push("of which observable (ms)");
+                }
+                let mut t = Table::new(&header);
                 for f in &tr.faults {
                     let (dtc, at, delay) = match &f.detected {
                         Some((dtc, ev, at)) => (
@@ -340,7 +345,14 @@ impl ReplaySummary {
                         ),
                         None => ("none".into(), "-".into(), "not detected".into()),
                     };
-                    t.row(vec![f.fault.clone(), secs(f.onset_ns), dtc, at, delay]);
+                    let mut row = vec![f.fault.clone(), secs(f.onset_ns), dtc, at, delay];
+                    if observable {
+                        row.push(
+                            f.observable_ns
+                                .map_or("-".into(), |ns| format!("{:.1}", ns as f64 * 1e-6)),
+                        );
+                    }
+                    t.row(row);
                 }
                 t.render(s)?;
             }

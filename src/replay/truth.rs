@@ -14,6 +14,9 @@ use serde::Deserializer;
 pub(crate) struct TruthMsg<'a> {
     pub fault: Cow<'a, str>,
     pub fault_active: bool,
+    /// Whether the fault changes anything in this sample (`fault_observable`), when the topic
+    /// says so (the intake truth does).
+    pub fault_observable: Option<bool>,
     /// The configured field's value; NaN when it is `null`, missing or not a number.
     pub value: f64,
 }
@@ -120,12 +123,14 @@ impl<'de> Visitor<'de> for TruthSeed<'_> {
     }
 
     fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
-        let (mut fault, mut active, mut value) = (None, None, f64::NAN);
+        let (mut fault, mut active, mut observable, mut value) = (None, None, None, f64::NAN);
         while let Some(key) = map.next_key_seed(CowStr)? {
             if key == "fault" {
                 fault = Some(map.next_value_seed(CowStr)?);
             } else if key == "fault_active" {
                 active = Some(map.next_value::<bool>()?);
+            } else if key == "fault_observable" {
+                observable = Some(map.next_value::<bool>()?);
             } else if key == self.field {
                 value = map.next_value_seed(LenientF64)?;
             } else {
@@ -135,6 +140,7 @@ impl<'de> Visitor<'de> for TruthSeed<'_> {
         Ok(TruthMsg {
             fault: fault.ok_or_else(|| de::Error::missing_field("fault"))?,
             fault_active: active.ok_or_else(|| de::Error::missing_field("fault_active"))?,
+            fault_observable: observable,
             value,
         })
     }
@@ -154,7 +160,14 @@ mod tests {
         assert_eq!(m.fault, "tps_open");
         assert!(m.fault_active);
         assert_eq!(m.value, 12.5);
+        assert_eq!(m.fault_observable, None);
         assert!(matches!(m.fault, Cow::Borrowed(_)));
+        let m = parse_truth(
+            br#"{"fault": "leak", "fault_active": true, "fault_observable": false, "p_m_pa": 1e5}"#,
+            "p_m_pa",
+        )
+        .expect("valid");
+        assert_eq!((m.fault_observable, m.value), (Some(false), 1e5));
         let m = parse_truth(
             br#"{"p_m_pa": null, "fault": "none", "fault_active": false}"#,
             "p_m_pa",
