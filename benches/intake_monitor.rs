@@ -106,6 +106,7 @@ fn intake_alarm_refit_256_segments(bencher: Bencher) {
             egr_full: 0.011,
             egr_cmd: if k % 50 < 25 { 0.0 } else { 0.3 },
             leak_unit: 240.0,
+            p_ref: 50_000.0,
         })
         .collect();
     bencher.bench_local(|| {

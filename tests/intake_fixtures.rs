@@ -66,7 +66,9 @@ fn table() -> SignalTable {
     .expect("table")
 }
 
-const RESIDUAL_TESTS: [&str; 5] = [
+const RESIDUAL_TESTS: [&str; 7] = [
+    "intake_map_frozen",
+    "intake_maf_frozen",
     "intake_pressure_consistency",
     "intake_flow_consistency",
     "intake_throttle_model",
@@ -220,7 +222,7 @@ fn check_random_drive(label: &str, o: &Outcome, events: &[&str], candidate: &str
 fn fitted(o: &Outcome) -> String {
     match o.decision {
         Some(IntakeDecision::Residual { fit, .. }) => match fit.fault.name() {
-            "map_sensor" => format!("bias {:.0} Pa", fit.parameter),
+            "map_sensor" => format!("offset {:.0} Pa, gain error {:.3}", fit.parameter, fit.gain),
             "maf_sensor" => format!("gain {:.3}", 1.0 + fit.parameter),
             "egr_valve" => format!("stuck at {:.2}", fit.parameter),
             _ => format!(
@@ -352,6 +354,30 @@ fn faults_are_isolated_over_several_seeds() {
             "intake_leak",
             "manifold_leak",
         ),
+        // The simulator's other sensor faults: a MAP gain error shows as a pressure-dependent
+        // bias, a MAF offset as a flow error the throttle model sees, a stuck MAP as a frozen
+        // reading.
+        (
+            IntakeFault::MapGain {
+                start_s: 10.0,
+                gain: 1.08,
+            },
+            "map_range_performance",
+            "map_sensor",
+        ),
+        (
+            IntakeFault::MafBias {
+                start_s: 10.0,
+                bias_kg_s: 0.002,
+            },
+            "maf_range_performance",
+            "maf_sensor",
+        ),
+        (
+            IntakeFault::MapStuck { start_s: 10.0 },
+            "map_range_performance",
+            "map_sensor",
+        ),
     ];
     for (fault, event, candidate) in faults {
         for seed in 101..=106 {
@@ -395,8 +421,12 @@ fn bad_input_is_refused_without_nan_or_panic() {
     let mut mon = IntakeMonitor::new(&model, &cfg, &table()).expect("monitor");
     mon.start_operation_cycle(0, &mut |_| {});
     let mut t = 0u64;
-    let mut feed = |mon: &mut IntakeMonitor, seg: Segment| {
+    let mut feed = |mon: &mut IntakeMonitor, mut seg: Segment| {
         t += 10_000_000;
+        // Sensor noise (a reading repeated exactly is a stuck sensor): +-100 Pa, +-0.5 %.
+        let wiggle = ((t / 10_000_000) % 7) as f64 - 3.0;
+        seg.map_pa += 33.0 * wiggle;
+        seg.maf_kg_s *= 1.0 + 0.0017 * wiggle;
         let mut refused = Vec::new();
         let mut raised = Vec::new();
         mon.process_segment(t, &seg, &mut |o| match o {

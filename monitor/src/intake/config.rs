@@ -70,6 +70,9 @@ pub struct IntakeMonitorConfig {
     pub maf_low_kg_s: f64,
     pub maf_high_kg_s: f64,
     pub circuit_persist_segments: u32,
+    /// A MAP or MAF reading repeated exactly this many segments in a row is a stuck sensor
+    /// (its range/performance DTC): the noise of a live sensor moves its reading every segment.
+    pub frozen_segments: u32,
     /// Normalized residuals are clipped to +-this before the CUSUMs (robust to rare transient
     /// outliers; the isolation fits use them unclipped).
     pub clip_sigma: f64,
@@ -142,6 +145,7 @@ impl Default for IntakeMonitorConfig {
             maf_low_kg_s: 5e-4,
             maf_high_kg_s: 0.25,
             circuit_persist_segments: 10,
+            frozen_segments: 10,
             clip_sigma: 8.0,
             pressure_cusum_min_bias_sigma: 2.0,
             pressure_cusum_threshold: 40.0,

@@ -22,7 +22,7 @@
 //!
 //! | hypothesis | parameter | `z_p * sqrt(S_p)` | `z_w * sqrt(S_w)` |
 //! |---|---|---|---|
-//! | MAP sensor bias | `b` (Pa) | `b` (immediately, no dynamics) | `-dW/dp b` |
+//! | MAP sensor error | offset `b` (Pa) and gain `c` | `b + c p_ref` (immediately, no dynamics) | `-dW/dp (b + c p_ref)` |
 //! | MAF sensor gain | `g - 1` | `delta` of `u = -MAF` (the filter's air is `g` times too much) | `(g - 1) MAF` |
 //! | EGR valve stuck at `s` | `s` in `[0, 1]` | `delta` of `u = W_egr1 (s - e_cmd)` | 0 |
 //! | leak | area `A >= 0` (m^2) | `delta` of `u = W_orifice1 A` | 0 |
@@ -109,7 +109,19 @@ pub struct SegmentRecord {
     pub egr_cmd: f64,
     /// Flow through a 1 m^2 hole from ambient at the current pressure (kg/s/m^2).
     pub leak_unit: f64,
+    /// Manifold pressure independent of the MAP sensor (the MAF-only filter's), Pa: what a MAP
+    /// gain error multiplies.
+    pub p_ref: f64,
 }
+
+/// Pressure scale of the MAP gain regressor (Pa), for conditioning.
+const P_SCALE: f64 = 1e5;
+/// Smallest weighted spread of the manifold pressure (Pa) over a fit for the MAP hypothesis to
+/// fit a gain besides its offset.
+const MAP_GAIN_MIN_SPREAD_PA: f64 = 10_000.0;
+/// Statistic charged for the MAP hypothesis's second parameter: the 99.8 % point of a
+/// one-degree-of-freedom chi-square, so noise alone rarely pays for it.
+const MAP_GAIN_PENALTY: f64 = 10.0;
 
 /// Fitted size of a hypothesis.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -117,8 +129,12 @@ pub struct Fit {
     pub fault: IntakeFault,
     /// GLR statistic `T` (-).
     pub glr: f64,
-    /// Best parameter: bias (Pa), gain error `g - 1` (-), stuck position (0..1), hole area (m^2).
+    /// Best parameter: MAP offset (Pa), MAF gain error `g - 1` (-), stuck position (0..1),
+    /// hole area (m^2).
     pub parameter: f64,
+    /// MAP hypothesis only: the gain error of the MAP reading (-), which adds `gain p_m` to the
+    /// offset; 0 for the others.
+    pub gain: f64,
 }
 
 /// Running least-squares sums since the onset.
@@ -138,6 +154,10 @@ pub struct HypothesisBank {
     evv: f64,
     /// Pressure-channel sum z^2 (the EGR hypothesis leaves the flow channel unexplained).
     szz_p: f64,
+    /// MAP gain regressor `h = (p_ref / P_SCALE) g_map`: sum h^2, sum g_map h, sum h z.
+    m22: f64,
+    m12: f64,
+    m2z: f64,
     segments: usize,
 }
 
@@ -174,6 +194,7 @@ impl HypothesisBank {
                 *gg += gi * gi;
                 *gz += gi * z;
             }
+            self.add_map_gain(g[0], r.p_ref, z);
             let g1 = self.delta[1] / r.s_p;
             let v = z + self.delta[2] / r.s_p;
             self.e11 += g1 * g1;
@@ -187,8 +208,52 @@ impl HypothesisBank {
             self.szz += z * z;
             self.sgg[0] += g_map * g_map;
             self.sgz[0] += g_map * z;
+            self.add_map_gain(g_map, r.p_ref, z);
             self.sgg[1] += g_maf * g_maf;
             self.sgz[1] += g_maf * z;
+        }
+    }
+
+    /// The MAP gain regressor's sums, for one channel's offset regressor `g`.
+    fn add_map_gain(&mut self, g: f64, p_ref: f64, z: f64) {
+        if !p_ref.is_finite() {
+            return;
+        }
+        let h = p_ref / P_SCALE * g;
+        self.m22 += h * h;
+        self.m12 += g * h;
+        self.m2z += h * z;
+    }
+
+    /// The MAP hypothesis: reading error `b + gain p_ref` fitted by least squares (offset only
+    /// when the pressure has not moved enough to tell a gain from an offset). Returns
+    /// `(T, b, gain)`.
+    fn map_fit(&self) -> (f64, f64, f64) {
+        let (s11, s1z) = (self.sgg[0], self.sgz[0]);
+        if !(s11 > 0.0) {
+            return (0.0, 0.0, 0.0);
+        }
+        let b0 = s1z / s11;
+        let offset_only = (b0 * s1z, b0, 0.0);
+        // A gain is told from an offset only by pressures that differ: the weighted spread of
+        // p_ref over the fit must reach MAP_GAIN_MIN_SPREAD_PA.
+        let mean = self.m12 / s11;
+        let spread = (self.m22 / s11 - mean * mean).max(0.0).sqrt() * P_SCALE;
+        if spread < MAP_GAIN_MIN_SPREAD_PA {
+            return offset_only;
+        }
+        let det = s11 * self.m22 - self.m12 * self.m12;
+        if !(det > 0.0) {
+            return offset_only;
+        }
+        let b = (self.m22 * s1z - self.m12 * self.m2z) / det;
+        let c = (s11 * self.m2z - self.m12 * s1z) / det;
+        // The extra parameter costs MAP_GAIN_PENALTY (it would otherwise always fit better).
+        let t = b * s1z + c * self.m2z - MAP_GAIN_PENALTY;
+        if t > offset_only.0 {
+            (t, b, c / P_SCALE)
+        } else {
+            offset_only
         }
     }
 
@@ -204,7 +269,7 @@ impl HypothesisBank {
             }
             (self.sgz[i] * theta, theta)
         };
-        let (t_map, b) = one(0, false);
+        let (t_map, b, map_gain) = self.map_fit();
         let (t_maf, g) = one(1, false);
         let (t_leak, a) = one(2, true);
         // EGR: minimize sum (v - s g1)^2 over s in [0, 1]; the statistic is the drop from the
@@ -221,21 +286,25 @@ impl HypothesisBank {
                 fault: IntakeFault::MapSensor,
                 glr: t_map,
                 parameter: b,
+                gain: map_gain,
             },
             Fit {
                 fault: IntakeFault::MafSensor,
                 glr: t_maf,
                 parameter: g,
+                gain: 0.0,
             },
             Fit {
                 fault: IntakeFault::EgrValve,
                 glr: t_egr,
                 parameter: s,
+                gain: 0.0,
             },
             Fit {
                 fault: IntakeFault::Leak,
                 glr: t_leak,
                 parameter: a,
+                gain: 0.0,
             },
         ]
     }
@@ -384,6 +453,7 @@ mod tests {
             egr_full: 0.011,
             egr_cmd,
             leak_unit: 240.0,
+            p_ref: 50_000.0,
         }
     }
 
@@ -433,6 +503,35 @@ mod tests {
             );
             assert!(ranked[0].glr > ranked[1].glr + 1.0, "{ranked:?}");
         }
+    }
+
+    /// A MAP gain error (the reading off by 8 % of the pressure) while the pressure moves: the
+    /// MAP hypothesis fits offset 0 and gain 0.08 exactly and wins.
+    #[test]
+    fn map_gain_error_is_fitted_as_a_gain() {
+        let mut bank = HypothesisBank::new();
+        for k in 0..200 {
+            let mut r = record(
+                0.0,
+                f64::NAN,
+                0.02,
+                if (k / 25) % 2 == 0 { 0.0 } else { 0.3 },
+            );
+            r.p_ref = if (k / 40) % 2 == 0 {
+                30_000.0
+            } else {
+                95_000.0
+            };
+            r.map_flow_gain = if r.p_ref < 50_000.0 { 0.0 } else { -1e-7 };
+            let err = 0.08 * r.p_ref;
+            r.z_p = err / r.s_p;
+            r.z_w = -r.map_flow_gain * err / r.s_w;
+            bank.push(&r);
+        }
+        let ranked = bank.ranked();
+        assert_eq!(ranked[0].fault, IntakeFault::MapSensor, "{ranked:?}");
+        assert!(ranked[0].parameter.abs() < 1e-6, "{ranked:?}");
+        assert!((ranked[0].gain - 0.08).abs() < 1e-12, "{ranked:?}");
     }
 
     #[test]

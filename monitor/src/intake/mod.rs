@@ -28,11 +28,13 @@
 //! - `intake_centralized_nis`, `intake_federated_nis`: windowed sums of the 2-dof NIS;
 //! - `intake_map_circuit`, `intake_maf_circuit`: readings outside the circuit range (kept out
 //!   of the filters);
+//! - `intake_map_frozen`, `intake_maf_frozen`: readings repeated exactly (a stuck sensor);
 //! - `intake_input_range`: an engine speed, throttle or EGR input the model refuses (speed 0 or
 //!   negative, NaN): the segment is skipped, nothing reaches the filters.
 //!
 //! Decision: a circuit range violation lasting `circuit_persist_segments` is a circuit fault
-//! (P0107/P0108, P0102/P0103). When a residual test fails, the hypothesis bank
+//! (P0107/P0108, P0102/P0103); a reading repeated exactly for `frozen_segments` segments is a
+//! stuck sensor (P0106/P0101: a live sensor's noise moves its reading every segment). When a residual test fails, the hypothesis bank
 //! ([`hypotheses`]) is refitted from the failing test's estimated onset (the last time its
 //! CUSUM was zero) and then follows every segment; the best hypothesis is named when it is
 //! significant and leads the runner-up clearly (see [`IntakeMonitorConfig`]). The EGR DTC is
@@ -93,13 +95,17 @@ pub enum IntakeDecision {
     Residual { fit: Fit, event: usize },
     /// A circuit range fault (event index into [`EVENT_NAMES`]).
     Circuit { event: usize },
+    /// A sensor whose reading is frozen (stuck): its range/performance event.
+    Frozen { event: usize },
 }
 
 impl IntakeDecision {
     /// Index of the DTC event in [`EVENT_NAMES`].
     pub fn event(&self) -> usize {
         match *self {
-            IntakeDecision::Residual { event, .. } | IntakeDecision::Circuit { event } => event,
+            IntakeDecision::Residual { event, .. }
+            | IntakeDecision::Circuit { event }
+            | IntakeDecision::Frozen { event } => event,
         }
     }
 
@@ -295,6 +301,11 @@ pub struct IntakeMonitor {
     cusum_t: OnsetCusum,
     nis_central: NisWindow,
     nis_federated: NisWindow,
+    /// Identical consecutive MAP / MAF readings (a live sensor's noise never repeats).
+    map_frozen_run: u32,
+    maf_frozen_run: u32,
+    last_map: f64,
+    last_maf: f64,
     map_low_run: u32,
     map_high_run: u32,
     maf_low_run: u32,
@@ -367,6 +378,9 @@ impl IntakeMonitor {
         if cfg.circuit_persist_segments == 0 {
             return Err(setting("circuit_persist_segments", "must be at least 1"));
         }
+        if cfg.frozen_segments < 2 {
+            return Err(setting("frozen_segments", "must be at least 2"));
+        }
         for (i, v) in cfg.q_std.iter().chain(cfg.p0_std.iter()).enumerate() {
             let key = if i < 6 { "q_std" } else { "p0_std" };
             if !(v.is_finite() && *v >= 0.0) {
@@ -430,6 +444,10 @@ impl IntakeMonitor {
             )?,
             nis_central: NisWindow::new(cfg.nis_window),
             nis_federated: NisWindow::new(cfg.nis_window),
+            map_frozen_run: 0,
+            maf_frozen_run: 0,
+            last_map: f64::NAN,
+            last_maf: f64::NAN,
             map_low_run: 0,
             map_high_run: 0,
             maf_low_run: 0,
@@ -593,6 +611,39 @@ impl IntakeMonitor {
             });
             return;
         }
+
+        // Frozen readings: a sensor stuck at one value (the ADC code of a live sensor moves
+        // with its noise every segment).
+        self.map_frozen_run = if seg.map_pa == self.last_map {
+            self.map_frozen_run + 1
+        } else {
+            0
+        };
+        self.maf_frozen_run = if seg.maf_kg_s == self.last_maf {
+            self.maf_frozen_run + 1
+        } else {
+            0
+        };
+        (self.last_map, self.last_maf) = (seg.map_pa, seg.maf_kg_s);
+
+        let frozen_result = |run: u32, limit: u32| TestResult {
+            value: f64::from(run),
+            min: 0.0,
+            max: f64::from(limit - 1),
+            verdict: if run >= limit {
+                Verdict::Failed
+            } else {
+                Verdict::Passed
+            },
+        };
+        out(Output::Test {
+            test: "intake_map_frozen",
+            result: frozen_result(self.map_frozen_run, self.cfg.frozen_segments),
+        });
+        out(Output::Test {
+            test: "intake_maf_frozen",
+            result: frozen_result(self.maf_frozen_run, self.cfg.frozen_segments),
+        });
 
         // Circuit range checks (the readings that fail them never reach the filters).
         let p_a = self.model.params().ambient_pressure_pa;
@@ -804,6 +855,7 @@ impl IntakeMonitor {
             egr_full: self.model.egr_flow_area(p_true, p.egr_max_area_m2).0,
             egr_cmd: seg.egr_cmd,
             leak_unit: self.model.throttle_flow_area(p_true, 1.0).0,
+            p_ref: x_maf[X_PM],
         };
         self.history.push(record);
         if self.episode.is_some() {
@@ -882,6 +934,24 @@ impl IntakeMonitor {
                 return;
             }
         }
+        let frozen_limit = self.cfg.frozen_segments;
+        for (run, event, name) in [
+            (self.map_frozen_run, 0, IntakeFault::MapSensor.name()),
+            (self.maf_frozen_run, 3, IntakeFault::MafSensor.name()),
+        ] {
+            if run >= frozen_limit {
+                self.deciding = TestResult {
+                    value: f64::from(run),
+                    min: 0.0,
+                    max: f64::from(frozen_limit - 1),
+                    verdict: Verdict::Failed,
+                };
+                self.candidates = [(name, 1.0), ("", 0.0), ("", 0.0), ("", 0.0)];
+                self.decided = Some(IntakeDecision::Frozen { event });
+                self.episode = None;
+                return;
+            }
+        }
         if self.episode.is_none() {
             if let Some((_result, onset)) = residual_alarm {
                 // Refit the hypotheses from the candidate onsets back from the estimate.
@@ -925,7 +995,9 @@ impl IntakeMonitor {
             max: self.cfg.isolation_margin,
             verdict: Verdict::PreFailed,
         };
-        if elapsed >= self.cfg.isolation_min_s && significant && clear {
+        // A repeated reading is a stuck sensor in the making: the frozen check names it.
+        let repeating = self.map_frozen_run > 0 || self.maf_frozen_run > 0;
+        if elapsed >= self.cfg.isolation_min_s && significant && clear && !repeating {
             self.isolation.verdict = Verdict::Failed;
             let total: f64 = ranked
                 .iter()
@@ -1020,6 +1092,9 @@ impl IntakeMonitor {
         self.map_high_run = 0;
         self.maf_low_run = 0;
         self.maf_high_run = 0;
+        self.map_frozen_run = 0;
+        self.maf_frozen_run = 0;
+        (self.last_map, self.last_maf) = (f64::NAN, f64::NAN);
         self.choked_run = 0;
         self.segment = 0;
     }
