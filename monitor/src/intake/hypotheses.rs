@@ -119,9 +119,11 @@ const P_SCALE: f64 = 1e5;
 /// Smallest weighted spread of the manifold pressure (Pa) over a fit for the MAP hypothesis to
 /// fit a gain besides its offset.
 const MAP_GAIN_MIN_SPREAD_PA: f64 = 10_000.0;
-/// Statistic charged for the MAP hypothesis's second parameter: the 99.8 % point of a
-/// one-degree-of-freedom chi-square, so noise alone rarely pays for it.
-const MAP_GAIN_PENALTY: f64 = 10.0;
+/// Statistic charged for the MAP hypothesis's second parameter, on the scale of the isolation
+/// threshold (60): the gain must explain the data clearly better than an offset. A smaller
+/// charge (10, the 99.8 % point of a one-dof chi-square) let the pressure-dependent signature of
+/// an EGR valve stuck open pass for a MAP gain error long enough to delay its isolation by 2 s.
+const MAP_GAIN_PENALTY: f64 = 60.0;
 
 /// Fitted size of a hypothesis.
 #[derive(Debug, Clone, Copy, PartialEq)]
