@@ -304,6 +304,55 @@ where
         })
     }
 
+    /// One step with a sensor missing (a reading refused as implausible, a lost signal): both
+    /// locals predict, each updates only if its measurement is given, then the master fuses
+    /// them. A local without its sensor runs on the model alone, so the other sensor's local
+    /// keeps a usable estimate through the outage. On any error nothing changes.
+    pub fn step_partial(
+        &mut self,
+        u: &SVector<f64, U>,
+        y1: Option<&SVector<f64, M1>>,
+        y2: Option<&SVector<f64, M2>>,
+    ) -> Result<(), FilterError> {
+        check_input(u)?;
+        if let Some(y) = y1 {
+            check_measurement(y, &[true; M1])?;
+        }
+        if let Some(y) = y2 {
+            check_measurement(y, &[true; M2])?;
+        }
+        let saved = (
+            *self.local1.state(),
+            *self.local1.covariance(),
+            *self.local2.state(),
+            *self.local2.covariance(),
+        );
+        let mut run = || -> Result<(SVector<f64, N>, SMatrix<f64, N, N>), FilterError> {
+            self.local1.predict(u)?;
+            self.local2.predict(u)?;
+            if let Some(y) = y1 {
+                self.local1.update(y, u)?;
+            }
+            if let Some(y) = y2 {
+                self.local2.update(y, u)?;
+            }
+            self.fuse()
+        };
+        match run() {
+            Ok((x, p)) => {
+                self.x = x;
+                self.p = p;
+                Ok(())
+            }
+            Err(e) => {
+                let r1 = self.local1.reset(saved.0, saved.1);
+                let r2 = self.local2.reset(saved.2, saved.3);
+                debug_assert!(r1.is_ok() && r2.is_ok());
+                Err(e)
+            }
+        }
+    }
+
     /// Fused state estimate (after the last successful step).
     pub fn state(&self) -> &SVector<f64, N> {
         &self.x

@@ -479,3 +479,46 @@ fn fusion_steps_allocate_nothing() {
     assert!(sink.is_finite());
     assert_eq!(count, 0, "fusion steps allocated {count} times");
 }
+
+/// A partial step with both measurements is the full step; with one missing, that local runs
+/// on the model alone (its state is the prediction) and the other updates as usual; a NaN
+/// measurement is refused and changes nothing.
+#[test]
+fn partial_step_runs_the_locals_that_have_a_measurement() {
+    let data = simulate(200, 31);
+    let (mut full, mut part) = (pair(), pair());
+    for (k, (u, y1, y2, _)) in data.iter().enumerate() {
+        full.step(u, y1, y2).expect("full step");
+        part.step_partial(u, Some(y1), Some(y2))
+            .expect("partial step");
+        close("state", k, full.state(), part.state());
+        close("covariance", k, full.covariance(), part.covariance());
+    }
+    // Sensor 1 lost: local 1 predicts only, local 2 is unaffected.
+    let (mut only2, mut model1) = (part.clone(), part.local1().clone());
+    let mut reference2 = part.local2().clone();
+    for (k, (u, _, y2, _)) in data.iter().enumerate().take(50) {
+        only2.step_partial(u, None, Some(y2)).expect("partial step");
+        model1.predict(u).expect("predict");
+        reference2.predict(u).expect("predict");
+        reference2.update(y2, u).expect("update");
+        close(
+            "model-only local",
+            k,
+            only2.local1().state(),
+            model1.state(),
+        );
+        close(
+            "updated local",
+            k,
+            only2.local2().state(),
+            reference2.state(),
+        );
+    }
+    let before = (*only2.state(), *only2.local1().state());
+    let (u, _, _, _) = &data[0];
+    assert!(only2
+        .step_partial(u, Some(&Vector1::new(f64::NAN)), None)
+        .is_err());
+    assert_eq!((*only2.state(), *only2.local1().state()), before);
+}

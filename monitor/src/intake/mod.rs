@@ -40,6 +40,14 @@
 //! significant and leads the runner-up clearly (see [`IntakeMonitorConfig`]). The EGR DTC is
 //! P0401 (insufficient) when the fitted stuck position is below the mean command since the
 //! onset, P0402 (excessive) otherwise. A named fault is latched for the operation cycle.
+//!
+//! Recovery policy: from the step a fault is named, the estimate output (`manifold_pressure`,
+//! `intake_valve_flow`) comes from the local filter that fault leaves sound: the MAF-only one
+//! after a MAP fault, the MAP-only one after a MAF, EGR or leak fault (it measures the pressure
+//! and its random-walk throttle flow absorbs unmetered air); the source names it. A reading
+//! refused by the circuit check is kept out of every filter; the centralized EKF and the pair go
+//! on with the other sensor, and the output comes from that sensor's local filter meanwhile. A
+//! new operation cycle starts again from the primary filter.
 
 pub mod config;
 pub mod hypotheses;
@@ -261,6 +269,14 @@ struct Episode {
     alarm_s: f64,
     cmd_sum: f64,
     segments: u64,
+}
+
+/// Whose estimate the monitor outputs (see [`IntakeMonitor::output_filter`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum OutputFilter {
+    Primary,
+    MapLocal,
+    MafLocal,
 }
 
 type Central = Ekf<IntakeModel, MapMafSensors, 6, 2, 3>;
@@ -692,7 +708,12 @@ impl IntakeMonitor {
             }
             residual_alarm = self.run_filters(k, &u, seg, out);
         } else {
+            // A refused reading: the filters go on with the other sensor (a local filter
+            // without its sensor runs on the model), no residual test this segment.
             self.skipped += 1;
+            if self.filters.is_some() {
+                self.run_filters_partial(&u, seg, map_ok, maf_ok);
+            }
         }
 
         self.isolation = TestResult::NOT_TESTED;
@@ -718,7 +739,7 @@ impl IntakeMonitor {
             None => {}
         }
         self.report_all(now_s, verdicts, out);
-        self.report_estimate(seg, out);
+        self.report_estimate(seg, map_ok, maf_ok, out);
     }
 
     /// Steps the three filters and the residual tests; returns the first failing residual test
@@ -1045,16 +1066,77 @@ impl IntakeMonitor {
         // episode goes on until the driving separates them.
     }
 
-    fn report_estimate(&self, seg: &Segment, out: &mut OutputSink<'_>) {
+    /// Steps the filters through a segment with a refused reading: the centralized EKF and the
+    /// decentralized pair update with the sensor that is left, the federated filter (which
+    /// needs both) waits.
+    fn run_filters_partial(&mut self, u: &IntakeInput, seg: &Segment, map_ok: bool, maf_ok: bool) {
+        let Some(f) = self.filters.as_mut() else {
+            return;
+        };
+        let y = Vector2::new(
+            if map_ok { seg.map_pa } else { 0.0 },
+            if maf_ok { seg.maf_kg_s } else { 0.0 },
+        );
+        let central = f.central.predict(u).and_then(|()| {
+            if map_ok || maf_ok {
+                f.central
+                    .update_subset(&y, u, &[map_ok, maf_ok])
+                    .map(|_| ())
+            } else {
+                Ok(())
+            }
+        });
+        let (y_map, y_maf) = (Vector1::new(seg.map_pa), Vector1::new(seg.maf_kg_s));
+        let pair = f
+            .pair
+            .step_partial(u, map_ok.then_some(&y_map), maf_ok.then_some(&y_maf));
+        if central.is_err() || pair.is_err() {
+            self.rejected += 1;
+        }
+    }
+
+    /// Which filter's estimate is the output. The configured primary while both sensors are
+    /// trusted; after a MAP fault (named, or a refused MAP reading) the MAF-only local filter,
+    /// after a MAF, EGR or leak fault the MAP-only local filter: it measures the pressure
+    /// itself and its random-walk throttle flow absorbs any unmetered air, so its pressure and
+    /// intake-valve flow stay right.
+    fn output_filter(&self, map_ok: bool, maf_ok: bool) -> OutputFilter {
+        let map_fault = match self.decided {
+            Some(IntakeDecision::Residual { fit, .. }) => Some(fit.fault == IntakeFault::MapSensor),
+            Some(d) => Some(d.event() <= 2),
+            None => None,
+        };
+        match (map_fault, map_ok, maf_ok) {
+            (Some(true), ..) | (None, false, true) => OutputFilter::MafLocal,
+            (Some(false), ..) | (None, true, false) => OutputFilter::MapLocal,
+            (None, ..) => OutputFilter::Primary,
+        }
+    }
+
+    fn report_estimate(&self, seg: &Segment, map_ok: bool, maf_ok: bool, out: &mut OutputSink<'_>) {
         let Some(f) = &self.filters else {
             return;
         };
-        let (x, p) = match self.cfg.primary_filter {
-            PrimaryFilter::Centralized => (f.central.state(), f.central.covariance()),
-            PrimaryFilter::Decentralized => (f.pair.state(), f.pair.covariance()),
-            PrimaryFilter::Federated => (f.federated.state(), f.federated.covariance()),
+        let (x, p, source) = match self.output_filter(map_ok, maf_ok) {
+            OutputFilter::MafLocal => (
+                f.pair.local2().state(),
+                f.pair.local2().covariance(),
+                "maf_local_ekf",
+            ),
+            OutputFilter::MapLocal => (
+                f.pair.local1().state(),
+                f.pair.local1().covariance(),
+                "map_local_ekf",
+            ),
+            OutputFilter::Primary => {
+                let (x, p) = match self.cfg.primary_filter {
+                    PrimaryFilter::Centralized => (f.central.state(), f.central.covariance()),
+                    PrimaryFilter::Decentralized => (f.pair.state(), f.pair.covariance()),
+                    PrimaryFilter::Federated => (f.federated.state(), f.federated.covariance()),
+                };
+                (x, p, self.cfg.primary_filter.name())
+            }
         };
-        let source = self.cfg.primary_filter.name();
         let pm = x[X_PM];
         let half = 1.96 * p[(X_PM, X_PM)].max(0.0).sqrt();
         out(Output::Estimate {
