@@ -105,9 +105,10 @@ pub struct IntakeMonitorConfig {
     pub nis_threshold: f64,
     /// Isolation: after a test fails, the fault hypotheses are fitted from the estimated onset.
     /// The best one is named when its GLR statistic exceeds `isolation_min_glr` and leads the
-    /// runner-up by `isolation_margin`, at least `isolation_min_s` after the alarm; at the
-    /// latest after `isolation_max_s` the best is named if it exceeds `isolation_min_glr`, else
-    /// the alarm is dropped as unexplained.
+    /// runner-up by `isolation_margin`, at least `isolation_min_s` after the alarm. A fault
+    /// that is significant but ambiguous is never forced: the episode stays open until the
+    /// driving separates the hypotheses. An episode in which no hypothesis is significant
+    /// `isolation_max_s` after the alarm is dropped as unexplained.
     pub isolation_min_glr: f64,
     pub isolation_margin: f64,
     pub isolation_min_s: f64,
