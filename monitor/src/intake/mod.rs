@@ -700,7 +700,7 @@ impl IntakeMonitor {
             ),
         });
 
-        let mut residual_alarm: Option<(TestResult, u64)> = None;
+        let mut residual_alarm: Option<u64> = None;
         if map_ok && maf_ok {
             if self.filters.is_none() && self.build_filters(&u).is_err() {
                 self.skipped += 1;
@@ -750,7 +750,7 @@ impl IntakeMonitor {
         u: &IntakeInput,
         seg: &Segment,
         out: &mut OutputSink<'_>,
-    ) -> Option<(TestResult, u64)> {
+    ) -> Option<u64> {
         let filters = self.filters.as_mut()?;
         let y_map = Vector1::new(seg.map_pa);
         let y_maf = Vector1::new(seg.maf_kg_s);
@@ -911,37 +911,29 @@ impl IntakeMonitor {
                 (rf.verdict == Verdict::Failed).then_some(window_onset),
             ),
         ];
-        let mut alarm: Option<(TestResult, u64)> = None;
+        // The earliest onset estimate of the tests that fail this segment.
+        let mut alarm: Option<u64> = None;
         for (name, result, onset) in tests {
             out(Output::Test { test: name, result });
             if let (Verdict::Failed, Some(o)) = (result.verdict, onset) {
-                alarm = Some(match alarm {
-                    Some((r0, o0)) if o0 <= o => (r0, o0),
-                    _ => (result, o),
-                });
+                alarm = Some(alarm.map_or(o, |a| a.min(o)));
             }
         }
         alarm
     }
 
-    fn decide(
-        &mut self,
-        now_s: f64,
-        k: u64,
-        seg: &Segment,
-        residual_alarm: Option<(TestResult, u64)>,
-    ) {
+    fn decide(&mut self, now_s: f64, k: u64, seg: &Segment, residual_alarm: Option<u64>) {
         if self.decided.is_some() {
             return;
         }
         let persist = self.cfg.circuit_persist_segments;
         let circuit = [
-            (self.map_low_run, 1, seg.map_pa, self.cfg.map_low_pa),
-            (self.map_high_run, 2, seg.map_pa, self.cfg.map_high_ratio),
-            (self.maf_low_run, 4, seg.maf_kg_s, self.cfg.maf_low_kg_s),
-            (self.maf_high_run, 5, seg.maf_kg_s, self.cfg.maf_high_kg_s),
+            (self.map_low_run, 1),
+            (self.map_high_run, 2),
+            (self.maf_low_run, 4),
+            (self.maf_high_run, 5),
         ];
-        for (run, event, _value, _limit) in circuit {
+        for (run, event) in circuit {
             if run >= persist {
                 self.deciding = TestResult {
                     value: f64::from(run),
@@ -974,7 +966,7 @@ impl IntakeMonitor {
             }
         }
         if self.episode.is_none() {
-            if let Some((_result, onset)) = residual_alarm {
+            if let Some(onset) = residual_alarm {
                 // Refit the hypotheses from the candidate onsets back from the estimate.
                 let earliest = onset
                     .saturating_sub(ONSET_MARGIN)
