@@ -261,26 +261,32 @@ where
         check_input(u)?;
         check_measurement(y1, &[true; M1])?;
         check_measurement(y2, &[true; M2])?;
+        let step = self.rolled_back_on_error(|pair| pair.try_step(u, y1, y2))?;
+        self.x = step.x;
+        self.p = step.p;
+        Ok(step)
+    }
+
+    /// Runs `f` on the pair; if it fails, both locals are put back as they were (the master is
+    /// only written by the callers, after success).
+    fn rolled_back_on_error<R>(
+        &mut self,
+        f: impl FnOnce(&mut Self) -> Result<R, FilterError>,
+    ) -> Result<R, FilterError> {
         let saved = (
             *self.local1.state(),
             *self.local1.covariance(),
             *self.local2.state(),
             *self.local2.covariance(),
         );
-        match self.try_step(u, y1, y2) {
-            Ok(step) => {
-                self.x = step.x;
-                self.p = step.p;
-                Ok(step)
-            }
-            Err(e) => {
-                // The saved estimates were accepted by the filters before, so the resets succeed.
-                let r1 = self.local1.reset(saved.0, saved.1);
-                let r2 = self.local2.reset(saved.2, saved.3);
-                debug_assert!(r1.is_ok() && r2.is_ok());
-                Err(e)
-            }
+        let result = f(self);
+        if result.is_err() {
+            // The saved estimates were accepted by the filters before, so the resets succeed.
+            let r1 = self.local1.reset(saved.0, saved.1);
+            let r2 = self.local2.reset(saved.2, saved.3);
+            debug_assert!(r1.is_ok() && r2.is_ok());
         }
+        result
     }
 
     fn try_step(
@@ -321,36 +327,20 @@ where
         if let Some(y) = y2 {
             check_measurement(y, &[true; M2])?;
         }
-        let saved = (
-            *self.local1.state(),
-            *self.local1.covariance(),
-            *self.local2.state(),
-            *self.local2.covariance(),
-        );
-        let mut run = || -> Result<(SVector<f64, N>, SMatrix<f64, N, N>), FilterError> {
-            self.local1.predict(u)?;
-            self.local2.predict(u)?;
+        let (x, p) = self.rolled_back_on_error(|pair| {
+            pair.local1.predict(u)?;
+            pair.local2.predict(u)?;
             if let Some(y) = y1 {
-                self.local1.update(y, u)?;
+                pair.local1.update(y, u)?;
             }
             if let Some(y) = y2 {
-                self.local2.update(y, u)?;
+                pair.local2.update(y, u)?;
             }
-            self.fuse()
-        };
-        match run() {
-            Ok((x, p)) => {
-                self.x = x;
-                self.p = p;
-                Ok(())
-            }
-            Err(e) => {
-                let r1 = self.local1.reset(saved.0, saved.1);
-                let r2 = self.local2.reset(saved.2, saved.3);
-                debug_assert!(r1.is_ok() && r2.is_ok());
-                Err(e)
-            }
-        }
+            pair.fuse()
+        })?;
+        self.x = x;
+        self.p = p;
+        Ok(())
     }
 
     /// Fused state estimate (after the last successful step).
