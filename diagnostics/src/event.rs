@@ -155,6 +155,199 @@ impl DiagnosticEvent {
     }
 }
 
+/// The freeze frame carried by an [`EventView`]: the configured signal names and their values
+/// (borrowed from the memory entry or from the report). `values` may be shorter than `signals`
+/// (a report without values for an entry that could not be stored); a missing or non-finite
+/// value is written as `null`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FreezeFrameView<'a> {
+    /// Signal names, in configured order.
+    pub signals: &'a [String],
+    /// Their values, in the same order.
+    pub values: &'a [f64],
+}
+
+impl<'a> FreezeFrameView<'a> {
+    /// An empty freeze frame.
+    pub const EMPTY: FreezeFrameView<'static> = FreezeFrameView {
+        signals: &[],
+        values: &[],
+    };
+
+    /// `(signal, value)` pairs; `None` where no finite value was captured.
+    pub fn iter(&self) -> impl Iterator<Item = (&'a str, Option<f64>)> + 'a {
+        let values = self.values;
+        self.signals.iter().enumerate().map(move |(j, s)| {
+            (
+                s.as_str(),
+                values.get(j).copied().filter(|v| v.is_finite()),
+            )
+        })
+    }
+
+    /// Number of signals.
+    pub fn len(&self) -> usize {
+        self.signals.len()
+    }
+
+    /// True without signals.
+    pub fn is_empty(&self) -> bool {
+        self.signals.is_empty()
+    }
+}
+
+/// One DTC status change, borrowed from the event memory that emits it: what
+/// [`DiagnosticEvent`] holds, without a single allocation. The memory hands views to its sink
+/// (`EventMemory::report_view` and friends), so a sink that only counts events, copies their
+/// fixed part or writes their JSON (the [`Serialize`] impl writes exactly the
+/// [`DiagnosticEvent`] shape) allocates nothing; [`EventView::to_event`] makes the owned form.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EventView<'a> {
+    /// Time of the cause, s.
+    pub time_s: f64,
+    /// The configured event name.
+    pub event: &'a str,
+    /// The DTC.
+    pub dtc: Dtc,
+    /// What caused the change.
+    pub trigger: Trigger,
+    /// The status byte before.
+    pub status_before: DtcStatus,
+    /// The status byte after.
+    pub status_after: DtcStatus,
+    /// Fault detection counter after the change.
+    pub fdc: i8,
+    /// Qualified failures since the last clear or aging (saturates at 255).
+    pub occurrence_counter: u8,
+    /// Aging cycles counted so far.
+    pub aging_counter: u8,
+    /// What happened to the memory entry.
+    pub memory: MemoryAction,
+    /// The DTC whose entry this event's new entry displaced.
+    pub displaced: Option<Dtc>,
+    /// The freeze frame.
+    pub freeze_frame: FreezeFrameView<'a>,
+    /// The test result that caused the change, if a report did.
+    pub test_result: Option<TestResult>,
+    /// The isolation candidates passed with the report.
+    pub candidates: &'a [(&'a str, f64)],
+}
+
+impl EventView<'_> {
+    /// Whether `bit` changed.
+    pub fn bit_changed(&self, bit: StatusBit) -> bool {
+        self.status_before.changed_bits(self.status_after).any(|b| b == bit)
+    }
+
+    /// True when this change sets testFailed (a new qualified failure).
+    pub fn raised(&self) -> bool {
+        !self.status_before.test_failed() && self.status_after.test_failed()
+    }
+
+    /// The owned event (allocates the strings and lists).
+    pub fn to_event(&self) -> DiagnosticEvent {
+        DiagnosticEvent {
+            time_s: self.time_s,
+            event: self.event.to_string(),
+            dtc: self.dtc,
+            dtc_uds: self.dtc.to_u32(),
+            trigger: self.trigger,
+            status_before: self.status_before,
+            status_after: self.status_after,
+            changed: self.status_before.changed_bits(self.status_after).collect(),
+            fdc: self.fdc,
+            occurrence_counter: self.occurrence_counter,
+            aging_counter: self.aging_counter,
+            memory: self.memory,
+            displaced: self.displaced,
+            freeze_frame: self
+                .freeze_frame
+                .iter()
+                .map(|(signal, value)| FreezeFrameValue {
+                    signal: signal.to_string(),
+                    value,
+                })
+                .collect(),
+            test_result: self.test_result,
+            candidates: self
+                .candidates
+                .iter()
+                .map(|(f, score)| FaultCandidate {
+                    fault: (*f).to_string(),
+                    score: *score,
+                })
+                .collect(),
+        }
+    }
+}
+
+/// Writes the [`DiagnosticEvent`] JSON shape, key for key, without building one.
+impl Serialize for EventView<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::{SerializeSeq, SerializeStruct};
+
+        struct Changed(DtcStatus, DtcStatus);
+        impl Serialize for Changed {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                let mut seq = s.serialize_seq(None)?;
+                for b in self.0.changed_bits(self.1) {
+                    seq.serialize_element(&b)?;
+                }
+                seq.end()
+            }
+        }
+        struct Frame<'f>(FreezeFrameView<'f>);
+        impl Serialize for Frame<'_> {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                #[derive(Serialize)]
+                struct Item<'i> {
+                    signal: &'i str,
+                    value: Option<f64>,
+                }
+                let mut seq = s.serialize_seq(Some(self.0.len()))?;
+                for (signal, value) in self.0.iter() {
+                    seq.serialize_element(&Item { signal, value })?;
+                }
+                seq.end()
+            }
+        }
+        struct Candidates<'c>(&'c [(&'c str, f64)]);
+        impl Serialize for Candidates<'_> {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                #[derive(Serialize)]
+                struct Item<'i> {
+                    fault: &'i str,
+                    score: f64,
+                }
+                let mut seq = s.serialize_seq(Some(self.0.len()))?;
+                for &(fault, score) in self.0 {
+                    seq.serialize_element(&Item { fault, score })?;
+                }
+                seq.end()
+            }
+        }
+
+        let mut st = s.serialize_struct("DiagnosticEvent", 17)?;
+        st.serialize_field("time_s", &self.time_s)?;
+        st.serialize_field("event", self.event)?;
+        st.serialize_field("dtc", &self.dtc)?;
+        st.serialize_field("dtc_uds", &self.dtc.to_u32())?;
+        st.serialize_field("trigger", &self.trigger)?;
+        st.serialize_field("status_before", &self.status_before)?;
+        st.serialize_field("status_after", &self.status_after)?;
+        st.serialize_field("changed", &Changed(self.status_before, self.status_after))?;
+        st.serialize_field("fdc", &self.fdc)?;
+        st.serialize_field("occurrence_counter", &self.occurrence_counter)?;
+        st.serialize_field("aging_counter", &self.aging_counter)?;
+        st.serialize_field("memory", &self.memory)?;
+        st.serialize_field("displaced", &self.displaced)?;
+        st.serialize_field("freeze_frame", &Frame(self.freeze_frame))?;
+        st.serialize_field("test_result", &self.test_result)?;
+        st.serialize_field("candidates", &Candidates(self.candidates))?;
+        st.end()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -240,5 +433,41 @@ mod tests {
         assert!(text.starts_with(r#"{"time_s":12.5,"event":"tps_a_high","dtc":"P0123-1C","#));
         assert!(e.bit_changed(StatusBit::PendingDtc));
         assert!(!e.bit_changed(StatusBit::ConfirmedDtc));
+    }
+
+    /// A view writes the same JSON as its owned event, and converts to it.
+    #[test]
+    fn view_serializes_as_the_event() {
+        let e = example();
+        let signals: Vec<String> = e.freeze_frame.iter().map(|f| f.signal.clone()).collect();
+        let values = [4.93, f64::NAN];
+        let candidates = [("tps_a_short_to_supply", 0.91), ("tps_a_bias", 0.09)];
+        let view = EventView {
+            time_s: e.time_s,
+            event: &e.event,
+            dtc: e.dtc,
+            trigger: e.trigger,
+            status_before: e.status_before,
+            status_after: e.status_after,
+            fdc: e.fdc,
+            occurrence_counter: e.occurrence_counter,
+            aging_counter: e.aging_counter,
+            memory: e.memory,
+            displaced: e.displaced,
+            freeze_frame: FreezeFrameView {
+                signals: &signals,
+                values: &values,
+            },
+            test_result: e.test_result,
+            candidates: &candidates,
+        };
+        assert_eq!(
+            serde_json::to_string(&view).unwrap(),
+            serde_json::to_string(&e).unwrap()
+        );
+        assert_eq!(view.to_event(), e);
+        assert!(view.raised());
+        assert!(view.bit_changed(StatusBit::PendingDtc));
+        assert!(!view.bit_changed(StatusBit::ConfirmedDtc));
     }
 }

@@ -74,7 +74,7 @@ use crate::dtc::config::{EventMemoryConfig, FreezeFrameUpdate, MilConfig, MilOn}
 use crate::dtc::debounce::{Debouncer, Qualified};
 use crate::dtc::status::DtcStatus;
 use crate::error::ConfigError;
-use crate::event::{DiagnosticEvent, FaultCandidate, FreezeFrameValue, MemoryAction, Trigger};
+use crate::event::{DiagnosticEvent, EventView, FreezeFrameView, MemoryAction, Trigger};
 use crate::verdict::{TestResult, Verdict};
 
 /// Handle of a configured event: its index in [`EventMemoryConfig::events`].
@@ -320,7 +320,7 @@ pub struct EventMemory {
     overflow_count: u32,
 }
 
-type Sink<'s> = &'s mut dyn FnMut(DiagnosticEvent);
+type Sink<'s> = &'s mut dyn FnMut(&EventView<'_>);
 
 impl EventMemory {
     /// Validates `config` and allocates everything the memory will ever need. No operation
@@ -557,12 +557,27 @@ impl EventMemory {
     /// byte after the report.
     ///
     /// `NotTested` changes nothing (it is accepted even outside an operation cycle).
+    ///
+    /// Builds an owned [`DiagnosticEvent`] per change; [`EventMemory::report_view`] hands out
+    /// borrowed views instead and allocates nothing.
     pub fn report(
         &mut self,
         id: EventId,
         result: &TestResult,
         ctx: &ReportContext<'_>,
         mut sink: impl FnMut(DiagnosticEvent),
+    ) -> Result<DtcStatus, DemError> {
+        self.report_view(id, result, ctx, |v| sink(v.to_event()))
+    }
+
+    /// [`EventMemory::report`] with each change passed as a borrowed [`EventView`]: no
+    /// allocation at all, status change or not.
+    pub fn report_view(
+        &mut self,
+        id: EventId,
+        result: &TestResult,
+        ctx: &ReportContext<'_>,
+        mut sink: impl FnMut(&EventView<'_>),
     ) -> Result<DtcStatus, DemError> {
         let i = self.check_id(id)?;
         self.check_time(ctx.time_s)?;
@@ -605,7 +620,7 @@ impl EventMemory {
         st.status
             .set_mask(DtcStatus::TF | DtcStatus::TNCSLC | DtcStatus::TNCTOC, false);
         if st.status != before {
-            let ev = self.build_event(
+            let ev = self.build_view(
                 i,
                 before,
                 ctx.time_s,
@@ -614,7 +629,7 @@ impl EventMemory {
                 None,
                 Some((result, ctx)),
             );
-            sink(ev);
+            sink(&ev);
         }
     }
 
@@ -671,7 +686,7 @@ impl EventMemory {
             }
         }
         if self.states[i].status != before || action != MemoryAction::Unchanged {
-            let ev = self.build_event(
+            let ev = self.build_view(
                 i,
                 before,
                 ctx.time_s,
@@ -680,7 +695,7 @@ impl EventMemory {
                 displaced,
                 Some((result, ctx)),
             );
-            sink(ev);
+            sink(&ev);
         }
     }
 
@@ -719,7 +734,7 @@ impl EventMemory {
                 self.states[v].occurrence_counter = 0;
                 self.states[v].aging_counter = 0;
                 // Built while the entry still exists, so the lost freeze frame is reported.
-                let ev = self.build_event(
+                let ev = self.build_view(
                     v,
                     before,
                     ctx.time_s,
@@ -728,9 +743,9 @@ impl EventMemory {
                     None,
                     None,
                 );
+                sink(&ev);
                 self.states[v].slot = None;
                 self.slots[k] = None;
-                sink(ev);
                 displaced = Some(self.defs[v].dtc);
                 k
             }
@@ -787,6 +802,15 @@ impl EventMemory {
         time_s: f64,
         mut sink: impl FnMut(DiagnosticEvent),
     ) -> Result<(), DemError> {
+        self.start_operation_cycle_view(time_s, |v| sink(v.to_event()))
+    }
+
+    /// [`EventMemory::start_operation_cycle`] with borrowed [`EventView`]s (no allocation).
+    pub fn start_operation_cycle_view(
+        &mut self,
+        time_s: f64,
+        mut sink: impl FnMut(&EventView<'_>),
+    ) -> Result<(), DemError> {
         self.check_time(time_s)?;
         if self.cycle_active {
             self.end_cycle(time_s, &mut sink);
@@ -801,7 +825,7 @@ impl EventMemory {
             st.status.set_mask(DtcStatus::TNCTOC, true);
             st.debouncer.reset();
             if st.status != before {
-                let ev = self.build_event(
+                let ev = self.build_view(
                     i,
                     before,
                     time_s,
@@ -810,7 +834,7 @@ impl EventMemory {
                     None,
                     None,
                 );
-                sink(ev);
+                sink(&ev);
             }
         }
         Ok(())
@@ -823,6 +847,15 @@ impl EventMemory {
         &mut self,
         time_s: f64,
         mut sink: impl FnMut(DiagnosticEvent),
+    ) -> Result<(), DemError> {
+        self.end_operation_cycle_view(time_s, |v| sink(v.to_event()))
+    }
+
+    /// [`EventMemory::end_operation_cycle`] with borrowed [`EventView`]s (no allocation).
+    pub fn end_operation_cycle_view(
+        &mut self,
+        time_s: f64,
+        mut sink: impl FnMut(&EventView<'_>),
     ) -> Result<(), DemError> {
         self.check_time(time_s)?;
         if !self.cycle_active {
@@ -867,7 +900,7 @@ impl EventMemory {
             st.status = s;
             if s != before || action != MemoryAction::Unchanged {
                 // Built while an aged entry still exists, so its freeze frame is reported.
-                let ev = self.build_event(
+                let ev = self.build_view(
                     i,
                     before,
                     time_s,
@@ -876,7 +909,7 @@ impl EventMemory {
                     None,
                     None,
                 );
-                sink(ev);
+                sink(&ev);
             }
             if action == MemoryAction::Aged {
                 if let Some(k) = self.states[i].slot.take() {
@@ -898,6 +931,16 @@ impl EventMemory {
         group: DtcGroup,
         time_s: f64,
         mut sink: impl FnMut(DiagnosticEvent),
+    ) -> Result<usize, DemError> {
+        self.clear_dtc_view(group, time_s, |v| sink(v.to_event()))
+    }
+
+    /// [`EventMemory::clear_dtc`] with borrowed [`EventView`]s (no allocation).
+    pub fn clear_dtc_view(
+        &mut self,
+        group: DtcGroup,
+        time_s: f64,
+        mut sink: impl FnMut(&EventView<'_>),
     ) -> Result<usize, DemError> {
         self.check_time(time_s)?;
         if let DtcGroup::Dtc(d) = group {
@@ -921,14 +964,12 @@ impl EventMemory {
             // Built before the entry goes, so the cleared freeze frame is reported.
             let changed = before != DtcStatus::AFTER_CLEAR || action != MemoryAction::Unchanged;
             self.states[i].reset();
-            let ev = changed.then(|| {
-                self.build_event(i, before, time_s, Trigger::ClearDtc, action, None, None)
-            });
+            if changed {
+                let ev = self.build_view(i, before, time_s, Trigger::ClearDtc, action, None, None);
+                sink(&ev);
+            }
             if let Some(k) = self.states[i].slot.take() {
                 self.slots[k as usize] = None;
-            }
-            if let Some(ev) = ev {
-                sink(ev);
             }
         }
         if group == DtcGroup::All {
@@ -941,62 +982,39 @@ impl EventMemory {
     // ---------------------------------------------------------------- events
 
     #[allow(clippy::too_many_arguments)]
-    fn build_event(
-        &self,
+    fn build_view<'s>(
+        &'s self,
         i: usize,
         before: DtcStatus,
         time_s: f64,
         trigger: Trigger,
         memory: MemoryAction,
         displaced: Option<Dtc>,
-        cause: Option<(&TestResult, &ReportContext<'_>)>,
-    ) -> DiagnosticEvent {
+        cause: Option<(&TestResult, &ReportContext<'s>)>,
+    ) -> EventView<'s> {
         let d = &self.defs[i];
         let s = &self.states[i];
-        let finite = |v: f64| v.is_finite().then_some(v);
         let freeze_frame = match (s.slot, cause) {
             (Some(k), _) => {
                 let base = k as usize * self.ff_stride;
-                d.freeze_frame
-                    .iter()
-                    .zip(&self.ff[base..base + d.freeze_frame.len()])
-                    .map(|(sig, v)| FreezeFrameValue {
-                        signal: sig.clone(),
-                        value: finite(*v),
-                    })
-                    .collect()
+                FreezeFrameView {
+                    signals: &d.freeze_frame,
+                    values: &self.ff[base..base + d.freeze_frame.len()],
+                }
             }
-            (None, Some((_, ctx))) if memory == MemoryAction::NotStored => d
-                .freeze_frame
-                .iter()
-                .enumerate()
-                .map(|(j, sig)| FreezeFrameValue {
-                    signal: sig.clone(),
-                    value: ctx.freeze_frame.get(j).copied().and_then(finite),
-                })
-                .collect(),
-            _ => Vec::new(),
+            (None, Some((_, ctx))) if memory == MemoryAction::NotStored => FreezeFrameView {
+                signals: &d.freeze_frame,
+                values: ctx.freeze_frame,
+            },
+            _ => FreezeFrameView::EMPTY,
         };
-        let candidates = cause
-            .map(|(_, ctx)| {
-                ctx.candidates
-                    .iter()
-                    .map(|(f, score)| FaultCandidate {
-                        fault: (*f).to_string(),
-                        score: *score,
-                    })
-                    .collect()
-            })
-            .unwrap_or_default();
-        DiagnosticEvent {
+        EventView {
             time_s,
-            event: d.name.clone(),
+            event: &d.name,
             dtc: d.dtc,
-            dtc_uds: d.dtc.to_u32(),
             trigger,
             status_before: before,
             status_after: s.status,
-            changed: before.changed_bits(s.status).collect(),
             fdc: s.debouncer.fdc(),
             occurrence_counter: s.occurrence_counter,
             aging_counter: s.aging_counter,
@@ -1004,7 +1022,7 @@ impl EventMemory {
             displaced,
             freeze_frame,
             test_result: cause.map(|(r, _)| *r),
-            candidates,
+            candidates: cause.map_or(&[], |(_, ctx)| ctx.candidates),
         }
     }
 }
