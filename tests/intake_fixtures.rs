@@ -100,8 +100,8 @@ fn run(frames: impl Iterator<Item = Frame>) -> Outcome {
             Output::Event(ev)
                 if ev.bit_changed(StatusBit::TestFailed) && ev.status_after.test_failed() =>
             {
-                raised.push(ev.event.clone());
-                top = ev.candidates.first().map(|c| c.fault.clone());
+                raised.push(ev.event.to_string());
+                top = ev.candidates.first().map(|c| c.0.to_string());
             }
             _ => {}
         });
@@ -438,7 +438,7 @@ fn bad_input_is_refused_without_nan_or_panic() {
             Output::Event(ev)
                 if ev.bit_changed(StatusBit::TestFailed) && ev.status_after.test_failed() =>
             {
-                raised.push(ev.event.clone())
+                raised.push(ev.event.to_string())
             }
             _ => {}
         });

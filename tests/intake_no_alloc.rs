@@ -42,7 +42,7 @@ fn intake_monitor_segments_allocate_nothing() {
     let mut sched = Scheduler::new(0);
     sched.add(Box::new(monitor)).expect("schedules");
     let mut outputs = 0u64;
-    let mut sink = |_: Output<'_>| outputs += 1;
+    let mut sink = |_: usize, _: u64, _: Output<'_>| outputs += 1;
     sched.start_operation_cycle(0, &mut sink);
     let sc = IntakeScenario::new(
         "alloc",

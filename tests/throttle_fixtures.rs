@@ -68,7 +68,7 @@ fn run(samples: impl Iterator<Item = (u64, f64, f64, f64, f64, bool)>) -> Run {
     let out = std::cell::RefCell::new(Run::default());
     let truth = std::cell::Cell::new(0.0);
     let now = std::cell::Cell::new(0.0);
-    let mut sink = |o: Output<'_>| {
+    let mut sink = |_: usize, _: u64, o: Output<'_>| {
         let mut r = out.borrow_mut();
         match o {
             Output::Event(e)

@@ -40,7 +40,7 @@ fn throttle_monitor_steps_allocate_nothing() {
     let mut sched = Scheduler::new(0);
     sched.add(Box::new(monitor)).expect("schedules");
     let mut outputs = 0u64;
-    let mut sink = |_: Output<'_>| outputs += 1;
+    let mut sink = |_: usize, _: u64, _: Output<'_>| outputs += 1;
     sched.start_operation_cycle(0, &mut sink);
     let plant = ThrottlePlant::from_default_config().expect("plant");
     let sc = Scenario::nominal_throttle("alloc", 10.0, 3);

@@ -177,12 +177,10 @@ impl<'a> FreezeFrameView<'a> {
     /// `(signal, value)` pairs; `None` where no finite value was captured.
     pub fn iter(&self) -> impl Iterator<Item = (&'a str, Option<f64>)> + 'a {
         let values = self.values;
-        self.signals.iter().enumerate().map(move |(j, s)| {
-            (
-                s.as_str(),
-                values.get(j).copied().filter(|v| v.is_finite()),
-            )
-        })
+        self.signals
+            .iter()
+            .enumerate()
+            .map(move |(j, s)| (s.as_str(), values.get(j).copied().filter(|v| v.is_finite())))
     }
 
     /// Number of signals.
@@ -236,7 +234,9 @@ pub struct EventView<'a> {
 impl EventView<'_> {
     /// Whether `bit` changed.
     pub fn bit_changed(&self, bit: StatusBit) -> bool {
-        self.status_before.changed_bits(self.status_after).any(|b| b == bit)
+        self.status_before
+            .changed_bits(self.status_after)
+            .any(|b| b == bit)
     }
 
     /// True when this change sets testFailed (a new qualified failure).

@@ -5,10 +5,13 @@
 //! - [`signal_table`]: latest value and timestamp per named signal, with staleness detection.
 //! - [`scheduler`] and [`monitor`]: monitors declare their inputs and rate and are stepped at it.
 
+pub mod config;
 pub mod intake;
 pub mod log;
 pub mod monitor;
 pub mod monitor_events;
+pub mod runtime;
 pub mod scheduler;
 pub mod signal_table;
+pub mod staleness;
 pub mod throttle;

@@ -6,39 +6,44 @@
 //! [`Monitor::step`] at the monitor's rate with the current [`SignalTable`].
 
 use fdd_diagnostics::dtc::{Dtc, DtcStatus};
-use fdd_diagnostics::event::DiagnosticEvent;
+use fdd_diagnostics::event::EventView;
 use fdd_diagnostics::TestResult;
 
+use crate::monitor_events::MonitorEvents;
 use crate::signal_table::{SignalId, SignalTable};
 
 /// Something a monitor reports during a step. Borrowed, so reporting allocates nothing; a sink
-/// that keeps an output copies what it needs.
+/// that keeps an output copies what it needs. Names of estimates, sources, filters and tests
+/// are fixed by the monitor's code (`'static`), so a queued copy needs no allocation either.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Output<'a> {
     /// An estimate of a physical quantity with its 95 % interval, and where it comes from
     /// (e.g. the throttle angle in degrees, from `"tps"` or `"wattmeter_estimate"`).
     Estimate {
-        name: &'a str,
+        name: &'static str,
         value: f64,
         lower: f64,
         upper: f64,
-        source: &'a str,
+        source: &'static str,
     },
     /// One filter's innovation: residual per measurement component, its predicted variance,
     /// the NIS and its degrees of freedom.
     Innovation {
-        filter: &'a str,
+        filter: &'static str,
         residual: &'a [f64],
         variance: &'a [f64],
         nis: f64,
         dof: usize,
     },
     /// One test's result this step.
-    Test { test: &'a str, result: TestResult },
+    Test {
+        test: &'static str,
+        result: TestResult,
+    },
     /// A DTC's status byte after this step (reported when it changes).
     DtcStatus { dtc: Dtc, status: DtcStatus },
-    /// A status change of the event memory.
-    Event(&'a DiagnosticEvent),
+    /// A status change of the event memory (borrowed; [`EventView::to_event`] owns it).
+    Event(&'a EventView<'a>),
 }
 
 /// The sink a monitor reports into.
@@ -63,4 +68,24 @@ pub trait Monitor {
 
     /// The operation cycle ends (ignition off, or the end of a replayed log).
     fn end_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>);
+
+    /// The monitor's DTCs: its event memory, read by the runtime's DTC services and persisted.
+    fn events(&self) -> &MonitorEvents;
+
+    /// Mutable access to the DTCs (clear, restore, freeze-frame configuration).
+    fn events_mut(&mut self) -> &mut MonitorEvents;
+
+    /// The freeze frame its DTCs store unless the configuration says otherwise: names of
+    /// runtime signals or of estimates the monitor declares in its [`MonitorEvents`].
+    fn default_freeze_frame(&self) -> Vec<String> {
+        Vec::new()
+    }
+
+    /// Some of its DTCs were cleared (UDS 0x14): restart the tests whose results were latched
+    /// for the operation cycle, as AUTOSAR's `InitMonitorForEvent(DEM_INIT_MONITOR_CLEAR)`.
+    fn restart_tests(&mut self, _now_ns: u64) {}
+
+    /// Starts or stops watching another monitor's signal (its consumer was enabled or
+    /// disabled). Only the "no signal" monitor watches signals it does not read itself.
+    fn set_signal_watched(&mut self, _id: SignalId, _watched: bool) {}
 }

@@ -6,7 +6,7 @@
 //! across monitors, on the table as it was; a step due exactly at `t` runs after that sample.
 //! So a step at time `T` sees exactly the samples stamped `<= T`.
 
-use crate::monitor::{Monitor, OutputSink};
+use crate::monitor::{Monitor, Output};
 use crate::signal_table::SignalTable;
 
 struct Entry {
@@ -14,6 +14,7 @@ struct Entry {
     period_ns: u64,
     next_due_ns: u64,
     steps: u64,
+    enabled: bool,
 }
 
 /// Why a monitor could not be scheduled.
@@ -22,6 +23,9 @@ pub enum ScheduleError {
     #[error("monitor `{0}` has a period of 0 ns")]
     ZeroPeriod(String),
 }
+
+/// The sink of a scheduled step: the monitor's index, the step's time (ns) and the output.
+pub type StepSink<'s> = dyn FnMut(usize, u64, Output<'_>) + 's;
 
 /// The set of monitors and when each runs next.
 pub struct Scheduler {
@@ -38,8 +42,9 @@ impl Scheduler {
         }
     }
 
-    /// Adds a monitor; its first step is due at the scheduler's start time.
-    pub fn add(&mut self, monitor: Box<dyn Monitor>) -> Result<(), ScheduleError> {
+    /// Adds a monitor (enabled); its first step is due at the scheduler's start time. Returns
+    /// its index.
+    pub fn add(&mut self, monitor: Box<dyn Monitor>) -> Result<usize, ScheduleError> {
         let period_ns = monitor.period_ns();
         if period_ns == 0 {
             return Err(ScheduleError::ZeroPeriod(monitor.name().to_string()));
@@ -49,44 +54,101 @@ impl Scheduler {
             period_ns,
             next_due_ns: self.start_ns,
             steps: 0,
+            enabled: true,
         });
-        Ok(())
+        Ok(self.entries.len() - 1)
+    }
+
+    /// Number of monitors.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// True without monitors.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// Monitor `i`.
+    pub fn monitor(&self, i: usize) -> &dyn Monitor {
+        self.entries[i].monitor.as_ref()
+    }
+
+    /// Monitor `i`, mutably.
+    pub fn monitor_mut(&mut self, i: usize) -> &mut dyn Monitor {
+        self.entries[i].monitor.as_mut()
+    }
+
+    /// The monitors, in the order they were added.
+    pub fn monitors(&self) -> impl Iterator<Item = &dyn Monitor> {
+        self.entries.iter().map(|e| e.monitor.as_ref())
+    }
+
+    /// Whether monitor `i` is stepped.
+    pub fn enabled(&self, i: usize) -> bool {
+        self.entries[i].enabled
+    }
+
+    /// Enables or disables monitor `i`. A monitor enabled again resumes at its next due time
+    /// after the latest step of any monitor (it does not catch up on the steps it missed).
+    pub fn set_enabled(&mut self, i: usize, on: bool, now_ns: u64) {
+        let e = &mut self.entries[i];
+        if on && !e.enabled {
+            while e.next_due_ns <= now_ns {
+                e.next_due_ns = e.next_due_ns.saturating_add(e.period_ns);
+                if e.next_due_ns == u64::MAX {
+                    break;
+                }
+            }
+        }
+        e.enabled = on;
+    }
+
+    /// Every monitor's next step falls at `start_ns` again (a new operation cycle).
+    pub fn restart(&mut self, start_ns: u64) {
+        self.start_ns = start_ns;
+        for e in &mut self.entries {
+            e.next_due_ns = start_ns;
+        }
     }
 
     /// Runs every step due strictly before `t_ns`, earliest first (ties in the order the
     /// monitors were added). Returns the number of steps run.
-    pub fn run_until(&mut self, t_ns: u64, signals: &SignalTable, out: &mut OutputSink<'_>) -> u64 {
+    pub fn run_until(&mut self, t_ns: u64, signals: &SignalTable, out: &mut StepSink<'_>) -> u64 {
         let mut ran = 0;
         loop {
-            let next = self
-                .entries
-                .iter()
-                .enumerate()
-                .filter(|(_, e)| e.next_due_ns < t_ns)
-                .min_by_key(|(_, e)| e.next_due_ns)
-                .map(|(i, _)| i);
-            let Some(i) = next else {
+            let mut next: Option<(usize, u64)> = None;
+            for (i, e) in self.entries.iter().enumerate() {
+                if e.enabled && e.next_due_ns < t_ns && next.is_none_or(|(_, d)| e.next_due_ns < d)
+                {
+                    next = Some((i, e.next_due_ns));
+                }
+            }
+            let Some((i, due)) = next else {
                 return ran;
             };
             let e = &mut self.entries[i];
-            e.monitor.step(e.next_due_ns, signals, out);
-            e.next_due_ns = e.next_due_ns.saturating_add(e.period_ns);
+            e.monitor.step(due, signals, &mut |o| out(i, due, o));
+            e.next_due_ns = due.saturating_add(e.period_ns);
             e.steps += 1;
             ran += 1;
         }
     }
 
-    /// Starts an operation cycle in every monitor.
-    pub fn start_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
-        for e in &mut self.entries {
-            e.monitor.start_operation_cycle(now_ns, out);
+    /// Starts an operation cycle in every monitor (its steps are not rescheduled: see
+    /// [`Scheduler::restart`]).
+    pub fn start_operation_cycle(&mut self, now_ns: u64, out: &mut StepSink<'_>) {
+        for (i, e) in self.entries.iter_mut().enumerate() {
+            e.monitor
+                .start_operation_cycle(now_ns, &mut |o| out(i, now_ns, o));
         }
     }
 
     /// Ends the operation cycle in every monitor.
-    pub fn end_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
-        for e in &mut self.entries {
-            e.monitor.end_operation_cycle(now_ns, out);
+    pub fn end_operation_cycle(&mut self, now_ns: u64, out: &mut StepSink<'_>) {
+        for (i, e) in self.entries.iter_mut().enumerate() {
+            e.monitor
+                .end_operation_cycle(now_ns, &mut |o| out(i, now_ns, o));
         }
     }
 
@@ -99,7 +161,8 @@ impl Scheduler {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::monitor::Output;
+    use crate::monitor::OutputSink;
+    use crate::monitor_events::MonitorEvents;
     use crate::signal_table::{SignalId, SignalSpec};
     use std::cell::RefCell;
     use std::rc::Rc;
@@ -113,6 +176,7 @@ mod tests {
         period: u64,
         input: SignalId,
         seen: Seen,
+        events: MonitorEvents,
     }
 
     impl Monitor for Probe {
@@ -131,6 +195,12 @@ mod tests {
         }
         fn start_operation_cycle(&mut self, _now_ns: u64, _out: &mut OutputSink<'_>) {}
         fn end_operation_cycle(&mut self, _now_ns: u64, _out: &mut OutputSink<'_>) {}
+        fn events(&self) -> &MonitorEvents {
+            &self.events
+        }
+        fn events_mut(&mut self) -> &mut MonitorEvents {
+            &mut self.events
+        }
     }
 
     #[test]
@@ -149,10 +219,11 @@ mod tests {
                 period,
                 input: x,
                 seen: seen.clone(),
+                events: MonitorEvents::new(&[]).expect("empty"),
             }))
             .expect("valid period");
         }
-        let mut sink = |_: Output<'_>| {};
+        let mut sink = |_: usize, _: u64, _: Output<'_>| {};
         // Samples at 0, 10, 20, 30 with values 0, 1, 2, 3.
         for (k, t) in [0u64, 10, 20, 30].into_iter().enumerate() {
             s.run_until(t, &table, &mut sink);
@@ -187,6 +258,7 @@ mod tests {
                 period: 0,
                 input: table.id("x").expect("declared"),
                 seen: Rc::new(RefCell::new(Vec::new())),
+                events: MonitorEvents::new(&[]).expect("empty"),
             }))
             .unwrap_err();
         assert_eq!(err, ScheduleError::ZeroPeriod("bad".into()));

@@ -129,6 +129,11 @@ impl SignalTable {
         self.latest[id.0]
     }
 
+    /// Latest sample, if any arrived; `None` also for an id of another table.
+    pub fn try_get(&self, id: SignalId) -> Option<Sample> {
+        self.latest.get(id.0).copied().flatten()
+    }
+
     /// Latest value if the signal is fresh at `now_ns` (not stale, and not from the future).
     pub fn fresh(&self, id: SignalId, now_ns: u64) -> Option<f64> {
         match self.latest[id.0] {

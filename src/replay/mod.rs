@@ -37,33 +37,29 @@
 pub mod config;
 pub mod problems;
 mod sinks;
-pub mod staleness;
 pub mod summary;
 mod truth;
 
-use std::cell::{Cell, RefCell};
 use std::fs::File;
 use std::io::{BufWriter, IsTerminal};
 use std::path::{Path, PathBuf};
-use std::rc::Rc;
 use std::sync::Arc;
 use std::time::Instant;
 
 use fdd_monitor::log::{
     ChannelInfo, LogError, LogMessage, LogReader, LogWriter, ReadMode, WriteOptions,
 };
-use fdd_monitor::monitor::{Monitor, OutputSink};
-use fdd_monitor::scheduler::Scheduler;
-use fdd_monitor::signal_table::{SignalId, SignalTable};
+use fdd_monitor::runtime::{Runtime, RuntimeError, Stamped};
+use fdd_monitor::signal_table::SignalId;
 use indicatif::{ProgressBar, ProgressStyle};
 
 pub use config::RuntimeConfig;
+pub use fdd_monitor::staleness::StalenessMonitor;
 pub use problems::{Problem, ProblemKind};
 pub use sinks::{
     DtcRecord, FaultOnset, DTC_STATUS_TOPIC, EVENTS_TOPIC, INNOVATION_TOPIC, POSITION_TOPIC,
     TESTS_TOPIC,
 };
-pub use staleness::StalenessMonitor;
 pub use summary::ReplaySummary;
 
 use config::s_to_ns;
@@ -89,6 +85,8 @@ pub enum ReplayError {
     },
     #[error("monitor `{monitor}`: {message}")]
     Monitor { monitor: String, message: String },
+    #[error(transparent)]
+    Runtime(#[from] RuntimeError),
     #[error("{}: refusing to write --{option} over the input log", file.display())]
     OutputIsInput { file: PathBuf, option: &'static str },
 }
@@ -102,182 +100,6 @@ pub struct ReplayOptions {
     pub events: Option<PathBuf>,
     /// Show a progress bar (only drawn when stderr is a terminal).
     pub progress: bool,
-}
-
-/// The monitors the configuration asks for, reading `table`.
-///
-/// `log_has_topic` says whether the log carries a topic, when that is known before reading
-/// (an indexed file): a subsystem monitor none of whose input topics is in the log does not run
-/// (a throttle log replayed with the intake monitor enabled raises no intake "no signal"
-/// DTCs), and the staleness monitor does not watch its signals. Such monitors are returned in
-/// the second list with the reason. With `None`, or when the log carries no monitor's topics
-/// at all (a wrong mapping, rather than a log of another subsystem), every enabled monitor
-/// runs.
-#[allow(clippy::type_complexity)]
-pub fn build_monitors(
-    cfg: &RuntimeConfig,
-    table: &SignalTable,
-    log_has_topic: Option<&dyn Fn(&str) -> bool>,
-) -> Result<(Vec<Box<dyn Monitor>>, Vec<(String, String)>), ReplayError> {
-    let mut subsystems: Vec<Box<dyn Monitor>> = Vec::new();
-    if cfg.monitors.throttle {
-        subsystems.push(Box::new(throttle_monitor(cfg, table)?));
-    }
-    if cfg.monitors.intake {
-        subsystems.push(Box::new(intake_monitor(cfg, table)?));
-    }
-    let mut skipped = Vec::new();
-    let mut skip_signals = Vec::new();
-    let mut monitors: Vec<Box<dyn Monitor>> = Vec::new();
-    let present: Vec<bool> = subsystems
-        .iter()
-        .map(|m| match log_has_topic {
-            None => true,
-            Some(has) => m.inputs().iter().any(|&id| {
-                let name = &table.spec(id).name;
-                cfg.signals.iter().any(|s| s.name == *name && has(&s.topic))
-            }),
-        })
-        .collect();
-    // A log that carries no monitor's topics at all is more likely mapped wrongly than meant
-    // for none of them: then every monitor runs and reports its signals missing.
-    let none_present = !present.iter().any(|&p| p);
-    for (m, present) in subsystems.into_iter().zip(present) {
-        let names: Vec<String> = m
-            .inputs()
-            .iter()
-            .map(|&id| table.spec(id).name.clone())
-            .collect();
-        if present || none_present {
-            monitors.push(m);
-        } else {
-            let topics: Vec<&str> = cfg
-                .signals
-                .iter()
-                .filter(|s| names.contains(&s.name))
-                .map(|s| s.topic.as_str())
-                .collect();
-            skipped.push((
-                m.name().to_string(),
-                format!("the log has none of its topics ({})", topics.join(", ")),
-            ));
-            skip_signals.extend(names);
-        }
-    }
-    // A signal another running monitor reads stays watched.
-    skip_signals.retain(|n| {
-        !monitors
-            .iter()
-            .any(|m| m.inputs().iter().any(|&id| table.spec(id).name == *n))
-    });
-    monitors.insert(
-        0,
-        Box::new(StalenessMonitor::from_config(cfg, table, &skip_signals)?),
-    );
-    for m in &monitors {
-        if m.period_ns() == 0 {
-            return Err(ReplayError::Monitor {
-                monitor: m.name().to_string(),
-                message: "period of 0 ns".into(),
-            });
-        }
-    }
-    Ok((monitors, skipped))
-}
-
-fn throttle_monitor(
-    cfg: &RuntimeConfig,
-    table: &SignalTable,
-) -> Result<fdd_monitor::throttle::ThrottleMonitor, ReplayError> {
-    let throttle = crate::config::ThrottleConfig::load(cfg.monitors.throttle_config.as_deref())?;
-    let err = |message: String| ReplayError::Monitor {
-        monitor: "throttle".into(),
-        message,
-    };
-    let model =
-        fdd_estimators::models::throttle::ThrottleModel::new(throttle.model).map_err(err)?;
-    let monitor = fdd_monitor::throttle::ThrottleMonitor::new(
-        model,
-        throttle.position_sensor.full_scale_v,
-        throttle.position_sensor.full_scale_deg,
-        &throttle.monitor,
-        table,
-    )
-    .map_err(|e| err(e.to_string()))?;
-    tracing::info!(
-        config = cfg
-            .monitors
-            .throttle_config
-            .as_ref()
-            .map(|p| p.display().to_string())
-            .unwrap_or_else(|| "embedded config/throttle.toml".into()),
-        "throttle monitor configured"
-    );
-    Ok(monitor)
-}
-
-fn intake_monitor(
-    cfg: &RuntimeConfig,
-    table: &SignalTable,
-) -> Result<fdd_monitor::intake::IntakeMonitor, ReplayError> {
-    let intake = crate::config::IntakeConfig::load(cfg.monitors.intake_config.as_deref())?;
-    let err = |message: String| ReplayError::Monitor {
-        monitor: "intake".into(),
-        message,
-    };
-    let model = fdd_estimators::models::intake::IntakeModel::new(
-        intake.model,
-        fdd_estimators::models::intake::ThrottleFlow::RandomWalk,
-    )
-    .map_err(err)?;
-    let monitor = fdd_monitor::intake::IntakeMonitor::new(&model, &intake.monitor, table)
-        .map_err(|e| err(e.to_string()))?;
-    tracing::info!(
-        config = cfg
-            .monitors
-            .intake_config
-            .as_ref()
-            .map(|p| p.display().to_string())
-            .unwrap_or_else(|| "embedded config/intake.toml".into()),
-        "intake monitor configured"
-    );
-    Ok(monitor)
-}
-
-type SharedMonitor = Rc<RefCell<Box<dyn Monitor>>>;
-
-/// Runs a shared monitor and tells the sinks the time of each call ([`fdd_monitor::monitor::Output`]
-/// carries no time). Shared so that a new scheduler can take the monitors over after a gap.
-struct Timed {
-    inner: SharedMonitor,
-    clock: Rc<Cell<u64>>,
-    name: String,
-    period_ns: u64,
-    inputs: Vec<SignalId>,
-}
-
-impl Monitor for Timed {
-    fn name(&self) -> &str {
-        &self.name
-    }
-    fn period_ns(&self) -> u64 {
-        self.period_ns
-    }
-    fn inputs(&self) -> &[SignalId] {
-        &self.inputs
-    }
-    fn step(&mut self, now_ns: u64, signals: &SignalTable, out: &mut OutputSink<'_>) {
-        self.clock.set(now_ns);
-        self.inner.borrow_mut().step(now_ns, signals, out);
-    }
-    fn start_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
-        self.clock.set(now_ns);
-        self.inner.borrow_mut().start_operation_cycle(now_ns, out);
-    }
-    fn end_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
-        self.clock.set(now_ns);
-        self.inner.borrow_mut().end_operation_cycle(now_ns, out);
-    }
 }
 
 /// A channel, resolved on first sight.
@@ -302,12 +124,8 @@ const PROGRESS_EVERY: u64 = 1 << 14;
 struct Replayer<'c> {
     cfg: &'c RuntimeConfig,
     file: PathBuf,
-    table: SignalTable,
+    rt: Runtime,
     sig_ids: Vec<SignalId>,
-    monitors: Vec<SharedMonitor>,
-    clock: Rc<Cell<u64>>,
-    scheduler: Option<Scheduler>,
-    steps: Vec<u64>,
     sinks: Sinks,
     channels: Vec<Option<Channel>>,
     sig: Vec<SignalStats>,
@@ -318,65 +136,51 @@ struct Replayer<'c> {
     prev_ns: Option<u64>,
     messages: u64,
     frames: u64,
-    cycles: u32,
     truth_messages: u64,
-    truth_active: bool,
+    /// Whether each truth topic's fault was active in its previous message.
+    truth_active: Vec<bool>,
     /// Time of the previous message of each truth topic, ns.
     truth_prev_ns: Vec<Option<u64>>,
 }
 
+/// The replay's sink: every runtime output to the collectors and writers.
+fn sink_of(sinks: &mut Sinks) -> impl FnMut(Stamped<'_>) + '_ {
+    |o: Stamped<'_>| sinks.on_output(o.t_ns, o.output)
+}
+
 impl Replayer<'_> {
+    fn runtime_error(&mut self, e: RuntimeError) {
+        tracing::error!("{}: runtime refused a call: {e}", self.file.display());
+    }
+
     fn start_cycle(&mut self, t_ns: u64) {
-        let mut sched = Scheduler::new(t_ns);
-        for m in &self.monitors {
-            let (name, period_ns, inputs) = {
-                let b = m.borrow();
-                (b.name().to_string(), b.period_ns(), b.inputs().to_vec())
-            };
-            // build_monitors refused zero periods, so adding cannot fail.
-            if let Err(e) = sched.add(Box::new(Timed {
-                inner: m.clone(),
-                clock: self.clock.clone(),
-                name,
-                period_ns,
-                inputs,
-            })) {
-                tracing::error!("{e}");
-            }
+        let res = self
+            .rt
+            .start_operation_cycle(t_ns, &mut sink_of(&mut self.sinks));
+        if let Err(e) = res {
+            self.runtime_error(e);
         }
-        self.cycles += 1;
-        tracing::info!(
-            "operation cycle {} starts at {:.6} s",
-            self.cycles,
-            t_ns as f64 * 1e-9
-        );
-        let sinks = &mut self.sinks;
-        self.clock.set(t_ns);
-        sched.start_operation_cycle(t_ns, &mut |o| sinks.on_output(o));
-        self.scheduler = Some(sched);
     }
 
     /// Runs the steps up to the latest time and ends the cycle 1 ns after it.
     fn end_cycle(&mut self) {
-        let Some(mut sched) = self.scheduler.take() else {
+        if !self.rt.operation_cycle_active() {
             return;
-        };
-        let end = self.latest_ns.saturating_add(1);
-        let Self { table, sinks, .. } = self;
-        sched.run_until(end, table, &mut |o| sinks.on_output(o));
-        self.clock.set(end);
-        sched.end_operation_cycle(end, &mut |o| sinks.on_output(o));
-        for (k, (_, n)) in sched.step_counts().enumerate() {
-            self.steps[k] += n;
         }
-        tracing::info!(
-            "operation cycle {} ends at {:.6} s",
-            self.cycles,
-            end as f64 * 1e-9
-        );
+        let end = self.latest_ns.saturating_add(1);
+        let res = {
+            let mut sink = sink_of(&mut self.sinks);
+            self.rt
+                .advance_to(self.latest_ns, &mut sink)
+                .and_then(|_| self.rt.end_operation_cycle(end, &mut sink))
+        };
+        if let Err(e) = res {
+            self.runtime_error(e);
+        }
     }
 
-    /// Moves time to `t_ns` before a sample stamped `t_ns` is applied.
+    /// Moves time to `t_ns` before a sample stamped `t_ns` is applied: every step due before
+    /// `t_ns` runs on the samples so far.
     fn advance(&mut self, t_ns: u64, topic: &str) {
         if self.first_ns.is_none() {
             self.first_ns = Some(t_ns);
@@ -405,14 +209,9 @@ impl Replayer<'_> {
             self.start_cycle(t_ns);
             return;
         }
-        let Self {
-            scheduler,
-            table,
-            sinks,
-            ..
-        } = self;
-        if let Some(s) = scheduler.as_mut() {
-            s.run_until(t_ns, table, &mut |o| sinks.on_output(o));
+        let res = self.rt.advance_to(t_ns - 1, &mut sink_of(&mut self.sinks));
+        if let Err(e) = res {
+            self.runtime_error(e);
         }
         self.latest_ns = t_ns;
     }
@@ -469,7 +268,7 @@ impl Replayer<'_> {
         let Self {
             cfg,
             file,
-            table,
+            rt,
             sig_ids,
             sinks,
             channels,
@@ -492,9 +291,9 @@ impl Replayer<'_> {
                     continue;
                 }
             };
-            match table.set(sig_ids[i], t, v) {
+            match rt.push(sig_ids[i], t, v) {
                 Ok(()) => sig[i].samples += 1,
-                Err(e) => {
+                Err(RuntimeError::Sample { source: e, .. }) => {
                     sig[i].rejected += 1;
                     problems.record(
                         ProblemKind::of_sample_error(&e),
@@ -512,6 +311,10 @@ impl Replayer<'_> {
                         },
                     );
                 }
+                Err(e) => {
+                    sig[i].rejected += 1;
+                    tracing::error!("{}: signal `{}`: {e}", file.display(), s.name);
+                }
             }
         }
         if let Some(ti) = ch.truth {
@@ -526,10 +329,10 @@ impl Replayer<'_> {
                     } else {
                         tm.value
                     };
-                    if tm.fault_active && !*truth_active {
+                    if tm.fault_active && !truth_active[ti] {
                         sinks.fault_onset(&tm.fault, t);
                     }
-                    *truth_active = tm.fault_active;
+                    truth_active[ti] = tm.fault_active;
                     if let (Some(obs), Some(prev)) = (tm.fault_observable, truth_prev_ns[ti]) {
                         sinks.fault_observable(obs && tm.fault_active, t.saturating_sub(prev));
                     }
@@ -609,78 +412,44 @@ pub fn replay(
         }
     }
 
-    let table = cfg.signal_table()?;
-    let sig_ids = cfg
-        .signals
-        .iter()
-        .map(|s| {
-            table.id(&s.name).ok_or_else(|| ReplayError::Monitor {
-                monitor: "signal table".into(),
-                message: format!("signal `{}` not declared", s.name),
-            })
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    let known_topics = (read_mode == ReadMode::Indexed).then(|| {
-        reader
-            .channels()
-            .map(|c| c.topic.to_string())
-            .collect::<Vec<String>>()
-    });
-    let has_topic = |t: &str| {
-        known_topics
-            .as_ref()
-            .is_some_and(|k| k.iter().any(|x| x == t))
+    // Which monitors run: those with at least one input topic in the log. An indexed file
+    // lists its channels up front; a file without a usable index is scanned once for them.
+    let topics: Vec<String> = match read_mode {
+        ReadMode::Indexed => reader.channels().map(|c| c.topic.to_string()).collect(),
+        _ => scan_topics(log),
     };
-    let (monitors, skipped) = build_monitors(
-        cfg,
-        &table,
-        known_topics
-            .is_some()
-            .then_some(&has_topic as &dyn Fn(&str) -> bool),
-    )?;
-    // The staleness monitor (first) watches exactly the signals of the monitors that run.
-    let watched: Vec<SignalId> = monitors
-        .first()
-        .map(|m| m.inputs().to_vec())
-        .unwrap_or_default();
+    let (run, skipped) = monitors_for_log(cfg, &topics);
     for (name, reason) in &skipped {
         tracing::info!(
             "monitor `{name}` does not run on {}: {reason}",
             file.display()
         );
     }
-    for m in &monitors {
-        tracing::info!(
-            monitor = m.name(),
-            "monitor `{}` started: period {} ms, {} inputs",
-            m.name(),
-            m.period_ns() as f64 * 1e-6,
-            m.inputs().len()
-        );
-    }
-    let monitors_unavailable: Vec<String> = cfg
-        .monitors
-        .enabled()
-        .into_iter()
-        .filter(|name| !monitors.iter().any(|m| m.name() == *name))
-        .map(str::to_string)
-        .collect();
-    for m in &monitors_unavailable {
-        tracing::info!(
-            "monitor `{m}` is enabled in {} but not part of this build: skipped",
-            cfg.origin
-        );
-    }
-    if read_mode == ReadMode::Indexed {
-        for s in &cfg.signals {
-            if reader.channel(&s.topic).is_none() {
-                tracing::warn!(
-                    "{}: the log has no topic {}: signal `{}` will be missing",
-                    file.display(),
-                    s.topic,
-                    s.name
-                );
-            }
+    let run_refs: Vec<&str> = run.iter().map(String::as_str).collect();
+    let (rt, _) = Runtime::builder(cfg.clone())
+        .only_monitors(&run_refs)
+        .build()?;
+    let sig_ids = cfg
+        .signals
+        .iter()
+        .map(|s| {
+            rt.signal(&s.name).ok_or_else(|| ReplayError::Monitor {
+                monitor: "signal table".into(),
+                message: format!("signal `{}` not declared", s.name),
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    // The staleness monitor watches exactly the signals of the monitors that run.
+    let watched: Vec<SignalId> = rt.watched_signals().to_vec();
+    for s in &cfg.signals {
+        let watched_signal = rt.signal(&s.name).is_some_and(|id| watched.contains(&id));
+        if watched_signal && !topics.contains(&s.topic) {
+            tracing::warn!(
+                "{}: the log has no topic {}: signal `{}` will be missing",
+                file.display(),
+                s.topic,
+                s.name
+            );
         }
     }
 
@@ -698,23 +467,14 @@ pub fn replay(
         None => None,
         Some(p) => Some(LogWriter::create_with(p, WriteOptions::default())?),
     };
-    let clock = Rc::new(Cell::new(0));
-    let sinks = Sinks::new(clock.clone(), events_file, out, &cfg.truth);
+    let sinks = Sinks::new(events_file, out, &cfg.truth);
 
-    let n_monitors = monitors.len();
     let mut r = Replayer {
         cfg,
         file: file.clone(),
         sig: vec![SignalStats::default(); cfg.signals.len()],
-        table,
+        rt,
         sig_ids,
-        monitors: monitors
-            .into_iter()
-            .map(|m| Rc::new(RefCell::new(m)))
-            .collect(),
-        clock,
-        scheduler: None,
-        steps: vec![0; n_monitors],
         sinks,
         channels: Vec::new(),
         problems: Problems::default(),
@@ -724,9 +484,8 @@ pub fn replay(
         prev_ns: None,
         messages: 0,
         frames: 0,
-        cycles: 0,
         truth_messages: 0,
-        truth_active: false,
+        truth_active: vec![false; cfg.truth.len()],
         truth_prev_ns: vec![None; cfg.truth.len()],
     };
 
@@ -774,6 +533,7 @@ pub fn replay(
     }
 
     let last = r.latest_ns;
+    let table = r.rt.signals();
     let signals = cfg
         .signals
         .iter()
@@ -786,9 +546,9 @@ pub fn replay(
                 field: s.field.clone(),
                 samples: r.sig[i].samples,
                 rejected: r.sig[i].rejected,
-                last_sample_ns: r.table.get(id).map(|x| x.t_ns),
-                missing: r.table.missing(id),
-                stale_at_end: r.table.is_stale(id, last),
+                last_sample_ns: table.get(id).map(|x| x.t_ns),
+                missing: table.missing(id),
+                stale_at_end: table.is_stale(id, last),
                 watched: watched.contains(&id),
             }
         })
@@ -817,15 +577,13 @@ pub fn replay(
             },
         })
         .collect();
-    let monitors = r
-        .monitors
-        .iter()
-        .zip(&r.steps)
-        .map(|(m, &steps)| MonitorSummary {
-            name: m.borrow().name().to_string(),
-            steps,
-        })
-        .collect();
+    let monitors =
+        r.rt.step_counts()
+            .map(|(name, steps)| MonitorSummary {
+                name: name.to_string(),
+                steps,
+            })
+            .collect();
     let stats = |s: &crate::stats::RunningStats| {
         (s.count() > 0).then(|| ErrorStats {
             samples: s.count(),
@@ -860,11 +618,11 @@ pub fn replay(
         frames: r.frames,
         wall_s,
         time_range_ns: r.first_ns.map(|a| (a, last)),
-        operation_cycles: r.cycles,
+        operation_cycles: r.rt.operation_cycles(),
         topics,
         signals,
         monitors,
-        monitors_unavailable,
+        monitors_skipped: skipped,
         problems: std::mem::take(&mut r.problems).into_list(),
         events: r.sinks.events,
         dtcs: r.sinks.dtcs.clone(),
@@ -888,4 +646,66 @@ pub fn replay(
         summary.events
     );
     Ok(summary)
+}
+
+/// The enabled subsystem monitors that run on a log with these topics, and those that do
+/// not (with the reason). A monitor runs when the log carries at least one of its input
+/// topics; a log that carries no monitor's topics at all is more likely mapped wrongly than
+/// meant for none of them, so then every enabled monitor runs and reports its signals missing.
+fn monitors_for_log(
+    cfg: &RuntimeConfig,
+    topics: &[String],
+) -> (Vec<String>, Vec<(String, String)>) {
+    let inputs = |name: &str| -> Vec<String> {
+        let sigs = fdd_monitor::runtime::monitor_inputs(cfg, name).unwrap_or_default();
+        cfg.signals
+            .iter()
+            .filter(|s| sigs.contains(&s.name))
+            .map(|s| s.topic.clone())
+            .collect()
+    };
+    let enabled = cfg.monitors.enabled();
+    let present: Vec<(&str, Vec<String>, bool)> = enabled
+        .iter()
+        .map(|&m| {
+            let t = inputs(m);
+            let p = t.iter().any(|x| topics.iter().any(|y| y == x));
+            (m, t, p)
+        })
+        .collect();
+    let none_present = !present.iter().any(|(_, _, p)| *p);
+    let mut run = Vec::new();
+    let mut skipped = Vec::new();
+    for (m, t, p) in present {
+        if p || none_present {
+            run.push(m.to_string());
+        } else {
+            skipped.push((
+                m.to_string(),
+                format!("the log has none of its topics ({})", t.join(", ")),
+            ));
+        }
+    }
+    (run, skipped)
+}
+
+/// The topics of a log without a usable index, from one pass over it (a truncated file is read
+/// up to its first unreadable record).
+fn scan_topics(log: &Path) -> Vec<String> {
+    let mut topics: Vec<String> = Vec::new();
+    let Ok(mut reader) = LogReader::open(log) else {
+        return topics;
+    };
+    while let Some(item) = reader.next_message() {
+        match item {
+            Ok(msg) => {
+                if !topics.iter().any(|t| t == msg.topic) {
+                    topics.push(msg.topic.to_string());
+                }
+            }
+            Err(e) if e.is_fatal() => break,
+            Err(_) => {}
+        }
+    }
+    topics
 }

@@ -6,14 +6,12 @@
 //! collectors, and those only for events (status changes) and, when the log has ground truth,
 //! the configured estimate.
 
-use std::cell::Cell;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::PathBuf;
-use std::rc::Rc;
 
 use fdd_diagnostics::dtc::{Dtc, DtcStatus, StatusBit};
-use fdd_diagnostics::event::DiagnosticEvent;
+use fdd_diagnostics::event::EventView;
 use fdd_diagnostics::Verdict;
 use fdd_monitor::log::{nan_as_null, vec_nan_as_null, LogWriter};
 use fdd_monitor::monitor::Output;
@@ -143,8 +141,6 @@ pub struct TruthTrack {
 /// The collectors and writers. Written to from inside monitor steps, so errors are kept in
 /// `error` and checked by the replay loop after each call.
 pub struct Sinks {
-    /// Time of the step being run (set by the monitor wrapper), ns.
-    pub clock: Rc<Cell<u64>>,
     events_file: Option<(PathBuf, BufWriter<File>)>,
     out: Option<LogWriter<BufWriter<File>>>,
     /// The first write error; nothing more is written after it.
@@ -165,13 +161,11 @@ pub struct Sinks {
 
 impl Sinks {
     pub fn new(
-        clock: Rc<Cell<u64>>,
         events_file: Option<(PathBuf, BufWriter<File>)>,
         out: Option<LogWriter<BufWriter<File>>>,
         truths: &[crate::replay::config::TruthConfig],
     ) -> Self {
         Sinks {
-            clock,
             events_file,
             out,
             error: None,
@@ -192,9 +186,8 @@ impl Sinks {
         }
     }
 
-    /// Takes one monitor output.
-    pub fn on_output(&mut self, o: Output<'_>) {
-        let t_ns = self.clock.get();
+    /// Takes one monitor output of the step at `t_ns`.
+    pub fn on_output(&mut self, t_ns: u64, o: Output<'_>) {
         match o {
             Output::Event(ev) => self.on_event(t_ns, ev),
             Output::Estimate {
@@ -288,14 +281,14 @@ impl Sinks {
         }
     }
 
-    fn on_event(&mut self, t_ns: u64, ev: &DiagnosticEvent) {
+    fn on_event(&mut self, t_ns: u64, ev: &EventView<'_>) {
         self.events += 1;
         let raised = ev.bit_changed(StatusBit::TestFailed) && ev.status_after.test_failed();
         let k = match self.dtcs.iter().position(|d| d.event == ev.event) {
             Some(k) => k,
             None => {
                 self.dtcs.push(DtcRecord {
-                    event: ev.event.clone(),
+                    event: ev.event.to_string(),
                     dtc: ev.dtc,
                     first_failed_s: None,
                     raised: 0,
@@ -322,7 +315,7 @@ impl Sinks {
             let onset_limit = ev.time_s;
             for f in &mut self.onsets {
                 if f.detected.is_none() && f.onset_ns as f64 * 1e-9 <= onset_limit {
-                    f.detected = Some((ev.dtc, ev.event.clone(), ev.time_s));
+                    f.detected = Some((ev.dtc, ev.event.to_string(), ev.time_s));
                 }
             }
         } else {

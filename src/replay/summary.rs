@@ -98,8 +98,8 @@ pub struct ReplaySummary {
     pub topics: Vec<TopicSummary>,
     pub signals: Vec<SignalSummary>,
     pub monitors: Vec<MonitorSummary>,
-    /// Monitors enabled in the configuration that this build does not have.
-    pub monitors_unavailable: Vec<String>,
+    /// Monitors enabled in the configuration that did not run on this log, with the reason.
+    pub monitors_skipped: Vec<(String, String)>,
     pub problems: Vec<Problem>,
     /// Status changes (DiagnosticEvents) emitted.
     pub events: u64,
@@ -203,9 +203,9 @@ impl ReplaySummary {
             .map(|m| format!("{} ({} steps)", m.name, m.steps))
             .collect();
         mons.extend(
-            self.monitors_unavailable
+            self.monitors_skipped
                 .iter()
-                .map(|m| format!("{m} (enabled, not in this build)")),
+                .map(|(m, why)| format!("{m} (not run: {why})")),
         );
         head.row(vec!["monitors".into(), mons.join(", ")]);
         head.row(vec![

@@ -517,7 +517,9 @@ fn lag_moments(r: f64) -> [f64; 4] {
 /// The intake manifold model: continuous truth and per-segment discrete transition.
 #[derive(Debug, Clone, PartialEq)]
 pub struct IntakeModel {
-    params: IntakeParams,
+    /// Shared, so that a filter bank's copies of the model (a monitor builds several filters
+    /// on it at the start of every operation cycle) cost a reference count, not an allocation.
+    params: std::sync::Arc<IntakeParams>,
     flow: ThrottleFlow,
     /// `R T_m / V_m` (Pa / kg).
     gain: f64,
@@ -539,7 +541,7 @@ impl IntakeModel {
             thr_scale: params.ambient_pressure_pa / (r * params.ambient_temperature_k).sqrt(),
             egr_scale: params.egr_upstream_pressure_pa / (r * params.egr_temperature_k).sqrt(),
             nozzle: FlowConsts::new(params.heat_capacity_ratio, params.steep_ratio),
-            params,
+            params: std::sync::Arc::new(params),
             flow,
         })
     }

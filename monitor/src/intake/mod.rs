@@ -67,7 +67,7 @@ pub use hypotheses::{
 };
 
 use crate::monitor::{Monitor, Output, OutputSink};
-use crate::monitor_events::{EventSpec, MonitorEvents};
+use crate::monitor_events::{EventSpec, FreezeValues, MonitorEvents};
 use crate::signal_table::{SignalId, SignalTable};
 
 /// Segments kept for refitting from an onset (5 s at 6000 rpm, 38 s at 800 rpm).
@@ -421,13 +421,9 @@ impl IntakeMonitor {
         let specs: Vec<EventSpec<'_>> = EVENT_NAMES
             .iter()
             .zip(dtcs)
-            .map(|(name, dtc)| EventSpec {
-                name,
-                dtc,
-                priority: 2,
-            })
+            .map(|(name, dtc)| EventSpec::internal(name, dtc, 2))
             .collect();
-        let events = MonitorEvents::new(&specs)?;
+        let events = MonitorEvents::new(&specs)?.with_estimates(&ESTIMATES);
         let mut monitor = Self {
             period_ns: (cfg.poll_period_s * 1e9).round().max(1.0) as u64,
             q: SMatrix::from_diagonal(&q_std.component_mul(&q_std)),
@@ -550,7 +546,13 @@ impl IntakeMonitor {
         Ok(())
     }
 
-    fn report_all(&mut self, now_s: f64, verdicts: [Verdict; 9], out: &mut OutputSink<'_>) {
+    fn report_all(
+        &mut self,
+        now_s: f64,
+        verdicts: [Verdict; 9],
+        values: FreezeValues<'_>,
+        out: &mut OutputSink<'_>,
+    ) {
         let n = if self.decided.is_some() {
             self.candidates
                 .iter()
@@ -560,8 +562,14 @@ impl IntakeMonitor {
             0
         };
         let candidates = self.candidates;
-        self.events
-            .report(now_s, &verdicts, &self.deciding, &candidates[..n], out);
+        self.events.report(
+            now_s,
+            &verdicts,
+            &self.deciding,
+            &candidates[..n],
+            values,
+            out,
+        );
     }
 
     /// Circuit range check of one reading: updates the run counters and says whether the
@@ -572,8 +580,20 @@ impl IntakeMonitor {
         !(low || high)
     }
 
-    /// Runs one crank segment ending at `t_ns`.
+    /// Runs one crank segment ending at `t_ns` (freeze frames get no signal values; the
+    /// runtime's steps pass the signal table).
     pub fn process_segment(&mut self, t_ns: u64, seg: &Segment, out: &mut OutputSink<'_>) {
+        self.process_segment_with(t_ns, seg, None, out);
+    }
+
+    /// Runs one crank segment ending at `t_ns`, with the signal table for freeze frames.
+    pub fn process_segment_with(
+        &mut self,
+        t_ns: u64,
+        seg: &Segment,
+        signals: Option<&SignalTable>,
+        out: &mut OutputSink<'_>,
+    ) {
         let now_s = t_ns as f64 * 1e-9;
         self.segment += 1;
         let k = self.segment;
@@ -738,8 +758,15 @@ impl IntakeMonitor {
             }
             None => {}
         }
-        self.report_all(now_s, verdicts, out);
-        self.report_estimate(seg, map_ok, maf_ok, out);
+        let est = self.estimate(seg, map_ok, maf_ok);
+        let values = FreezeValues {
+            signals,
+            estimates: &est.as_ref().map_or([f64::NAN; 2], |e| [e.pm, e.w]),
+        };
+        self.report_all(now_s, verdicts, values, out);
+        if let Some(e) = est {
+            e.emit(out);
+        }
     }
 
     /// Steps the three filters and the residual tests; returns the first failing residual test
@@ -1105,10 +1132,9 @@ impl IntakeMonitor {
         }
     }
 
-    fn report_estimate(&self, seg: &Segment, map_ok: bool, maf_ok: bool, out: &mut OutputSink<'_>) {
-        let Some(f) = &self.filters else {
-            return;
-        };
+    /// The estimate output of this segment: from the filter the recovery policy chooses.
+    fn estimate(&self, seg: &Segment, map_ok: bool, maf_ok: bool) -> Option<Estimates> {
+        let f = self.filters.as_ref()?;
         let (x, p, source) = match self.output_filter(map_ok, maf_ok) {
             OutputFilter::MafLocal => (
                 f.pair.local2().state(),
@@ -1131,22 +1157,15 @@ impl IntakeMonitor {
         };
         let pm = x[X_PM];
         let half = 1.96 * p[(X_PM, X_PM)].max(0.0).sqrt();
-        out(Output::Estimate {
-            name: "manifold_pressure",
-            value: pm,
-            lower: pm - half,
-            upper: pm + half,
-            source,
-        });
         let (slope, _) = self.model.vol_eff(seg.speed_rpm);
         let w = self.model.intake_valve_flow(pm, seg.speed_rpm);
-        out(Output::Estimate {
-            name: "intake_valve_flow",
-            value: w,
-            lower: w - slope * half,
-            upper: w + slope * half,
+        Some(Estimates {
+            pm,
+            half,
+            w,
+            w_half: slope * half,
             source,
-        });
+        })
     }
 
     fn reset_cycle_state(&mut self) {
@@ -1171,6 +1190,38 @@ impl IntakeMonitor {
         (self.last_map, self.last_maf) = (f64::NAN, f64::NAN);
         self.choked_run = 0;
         self.segment = 0;
+    }
+}
+
+/// Estimates the monitor offers to freeze frames: manifold pressure (Pa) and intake-valve
+/// flow (kg/s), as on its estimate output.
+pub const ESTIMATES: [&str; 2] = ["manifold_pressure", "intake_valve_flow"];
+
+/// One segment's estimate output.
+struct Estimates {
+    pm: f64,
+    half: f64,
+    w: f64,
+    w_half: f64,
+    source: &'static str,
+}
+
+impl Estimates {
+    fn emit(&self, out: &mut OutputSink<'_>) {
+        out(Output::Estimate {
+            name: "manifold_pressure",
+            value: self.pm,
+            lower: self.pm - self.half,
+            upper: self.pm + self.half,
+            source: self.source,
+        });
+        out(Output::Estimate {
+            name: "intake_valve_flow",
+            value: self.w,
+            lower: self.w - self.w_half,
+            upper: self.w + self.w_half,
+            source: self.source,
+        });
     }
 }
 
@@ -1221,7 +1272,7 @@ impl Monitor for IntakeMonitor {
             map_pa: map.value,
             maf_kg_s: maf.value,
         };
-        self.process_segment(map.t_ns, &seg, out);
+        self.process_segment_with(map.t_ns, &seg, Some(signals), out);
     }
 
     fn start_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
@@ -1231,5 +1282,33 @@ impl Monitor for IntakeMonitor {
 
     fn end_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
         self.events.end_operation_cycle(now_ns, out);
+    }
+
+    fn events(&self) -> &MonitorEvents {
+        &self.events
+    }
+
+    fn events_mut(&mut self) -> &mut MonitorEvents {
+        &mut self.events
+    }
+
+    /// The five intake signals and the two estimates at the failure.
+    fn default_freeze_frame(&self) -> Vec<String> {
+        [
+            &self.cfg.speed_signal,
+            &self.cfg.throttle_signal,
+            &self.cfg.egr_signal,
+            &self.cfg.map_signal,
+            &self.cfg.maf_signal,
+        ]
+        .into_iter()
+        .cloned()
+        .chain(ESTIMATES.iter().map(|e| e.to_string()))
+        .collect()
+    }
+
+    /// A cleared fault is isolated again from scratch, as in a new cycle.
+    fn restart_tests(&mut self, _now_ns: u64) {
+        self.reset_cycle_state();
     }
 }

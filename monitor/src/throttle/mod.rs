@@ -42,7 +42,7 @@ use nalgebra::{Matrix1, Matrix2, Matrix3, Vector1, Vector2, Vector3};
 pub use config::ThrottleMonitorConfig;
 
 use crate::monitor::{Monitor, Output, OutputSink};
-use crate::monitor_events::{EventSpec, MonitorEvents};
+use crate::monitor_events::{EventSpec, FreezeValues, MonitorEvents};
 use crate::signal_table::{SignalId, SignalTable};
 
 /// Capacity of the fixed rings (NIS window, motion window, dropout times).
@@ -104,6 +104,9 @@ pub const EVENT_NAMES: [&str; 7] = [
     "wattmeter_plausibility",
     "position_from_wattmeter",
 ];
+
+/// Estimates the monitor offers to freeze frames: the position output (deg).
+pub const ESTIMATES: [&str; 1] = ["throttle_angle"];
 
 /// Index of the switch event in [`EVENT_NAMES`].
 const SWITCH_EVENT: usize = 6;
@@ -317,13 +320,9 @@ impl ThrottleMonitor {
             .iter()
             .zip(dtcs)
             .enumerate()
-            .map(|(i, (name, dtc))| EventSpec {
-                name,
-                dtc,
-                priority: if i < 4 { 2 } else { 3 },
-            })
+            .map(|(i, (name, dtc))| EventSpec::internal(name, dtc, if i < 4 { 2 } else { 3 }))
             .collect();
-        let events = MonitorEvents::new(&specs)?;
+        let events = MonitorEvents::new(&specs)?.with_estimates(&ESTIMATES);
         Ok(Self {
             period_ns: (cfg.period_s * 1e9).round() as u64,
             volts_per_deg: tps_full_scale_v / tps_full_scale_deg,
@@ -379,14 +378,39 @@ impl ThrottleMonitor {
         self.tps_failed
     }
 
-    fn report_all(&mut self, now_s: f64, verdicts: [Verdict; 7], out: &mut OutputSink<'_>) {
+    fn report_all(
+        &mut self,
+        now_s: f64,
+        verdicts: [Verdict; 7],
+        values: FreezeValues<'_>,
+        out: &mut OutputSink<'_>,
+    ) {
         // A failed event carries the test result that qualified the fault and the candidate;
         // other reports carry only their verdict (the tests' statistics are on their own
         // outputs).
         let candidate = self.decided.map(|f| [(f.name(), 1.0)]);
         let candidates: &[(&str, f64)] = candidate.as_ref().map_or(&[], |c| c);
         self.events
-            .report(now_s, &verdicts, &self.deciding, candidates, out);
+            .report(now_s, &verdicts, &self.deciding, candidates, values, out);
+    }
+
+    /// Restarts the fault decision and the filters, as at the start of an operation cycle
+    /// (after a cycle start, or after a ClearDTC of this monitor's DTCs).
+    fn restart(&mut self) {
+        self.tps_ukf = self.tps_ukf_init.clone();
+        self.both_ukf = self.both_ukf_init.clone();
+        self.decided = None;
+        self.deciding = TestResult::NOT_TESTED;
+        self.first_result = TestResult::NOT_TESTED;
+        self.tps_failed = false;
+        self.watt_failed = false;
+        self.first_fail_s = None;
+        self.fired = [false; 3];
+        self.nis_ring.clear();
+        self.nis_sum = 0.0;
+        self.dropouts.clear();
+        self.rail_low_run = 0;
+        self.rail_high_run = 0;
     }
 
     fn classify(&self) -> ThrottleFault {
@@ -626,11 +650,14 @@ impl Monitor for ThrottleMonitor {
             }
             None => {}
         }
-        self.report_all(now_s, event_verdicts, out);
-
         // Position output: fused with the TPS while it is trusted, the wattmeter estimate after.
         let x = *self.both_ukf.state();
         let angle = self.model.angle_deg(&x);
+        let values = FreezeValues {
+            signals: Some(signals),
+            estimates: &[angle],
+        };
+        self.report_all(now_s, event_verdicts, values, out);
         let half = 1.96 * self.both_ukf.covariance()[(0, 0)].max(0.0).sqrt()
             / self.model.params().angle_scale;
         out(Output::Estimate {
@@ -652,23 +679,36 @@ impl Monitor for ThrottleMonitor {
     fn start_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
         self.events.start_operation_cycle(now_ns, out);
         // A new cycle starts from the TPS again (see the recovery policy).
-        self.tps_ukf = self.tps_ukf_init.clone();
-        self.both_ukf = self.both_ukf_init.clone();
-        self.decided = None;
-        self.deciding = TestResult::NOT_TESTED;
-        self.first_result = TestResult::NOT_TESTED;
-        self.tps_failed = false;
-        self.watt_failed = false;
-        self.first_fail_s = None;
-        self.fired = [false; 3];
-        self.nis_ring.clear();
-        self.nis_sum = 0.0;
-        self.dropouts.clear();
-        self.rail_low_run = 0;
-        self.rail_high_run = 0;
+        self.restart();
     }
 
     fn end_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
         self.events.end_operation_cycle(now_ns, out);
+    }
+
+    fn events(&self) -> &MonitorEvents {
+        &self.events
+    }
+
+    fn events_mut(&mut self) -> &mut MonitorEvents {
+        &mut self.events
+    }
+
+    /// The three throttle signals and the position estimate at the failure.
+    fn default_freeze_frame(&self) -> Vec<String> {
+        [
+            &self.cfg.motor_voltage_signal,
+            &self.cfg.tps_signal,
+            &self.cfg.wattmeter_signal,
+        ]
+        .into_iter()
+        .cloned()
+        .chain(ESTIMATES.iter().map(|e| e.to_string()))
+        .collect()
+    }
+
+    /// A cleared TPS fault is tested again from the TPS, as in a new cycle.
+    fn restart_tests(&mut self, _now_ns: u64) {
+        self.restart();
     }
 }

@@ -9,22 +9,22 @@
 //! - otherwise it is fresh.
 //!
 //! Each signal has one event (`<signal>_no_signal`, DTC from the configuration) in the
-//! monitor's own [`EventMemory`]. With the default monitor-internal debounce, stale or missing
+//! monitor's own event memory ([`MonitorEvents`]). With the default monitor-internal debounce, stale or missing
 //! reports `FAILED` and fresh `PASSED` (the `max_age` is the debounce time); with a counter or
 //! time debounce, `PRE_FAILED` / `PRE_PASSED` and the debouncer qualifies. The test result
 //! carries the sample's age in seconds (`null` while missing) against `[0, max_age_s]`.
 //!
-//! Outputs: every status change as [`Output::Event`], and the new status byte as
-//! [`Output::DtcStatus`]. A signal going stale or missing is logged at `warn` once per episode,
+//! Outputs: every status change as [`crate::monitor::Output::Event`], and the new status byte
+//! as [`crate::monitor::Output::DtcStatus`]. A signal going stale or missing is logged at `warn` once per episode,
 //! its recovery at `info`. A step with no status change allocates nothing and logs nothing.
 
-use fdd_diagnostics::dtc::{DebounceConfig, Dtc, EventId, EventMemory, ReportContext};
+use fdd_diagnostics::dtc::{DebounceConfig, Dtc};
 use fdd_diagnostics::{TestResult, Verdict};
-use fdd_monitor::monitor::{Monitor, Output, OutputSink};
-use fdd_monitor::signal_table::{SignalId, SignalTable};
 
-use super::config::{s_to_ns, RuntimeConfig};
-use super::ReplayError;
+use crate::monitor::{Monitor, OutputSink};
+use crate::monitor_events::{EventSpec, FreezeValues, MonitorEvents};
+use crate::runtime::config::{s_to_ns, stale_event_name, RuntimeConfig};
+use crate::signal_table::{SignalId, SignalTable};
 
 /// What the monitor last saw of a signal.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -40,14 +40,26 @@ enum Seen {
 #[derive(Debug)]
 struct Watched {
     id: SignalId,
-    event: EventId,
+    /// Index of its event in the memory (= index of the signal in the configuration).
+    event: usize,
     dtc: Dtc,
     name: String,
     topic: String,
     max_age_ns: u64,
     seen: Seen,
+    /// Whether the signal is watched now (its consumer runs).
+    active: bool,
     /// Stale or missing episodes so far.
     episodes: u64,
+}
+
+/// Why the staleness monitor could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum StalenessError {
+    #[error("staleness monitor: signal `{0}` is not in the signal table")]
+    MissingSignal(String),
+    #[error("staleness monitor: {0}")]
+    Events(#[from] fdd_diagnostics::ConfigError),
 }
 
 /// The staleness monitor. See the [module documentation](self).
@@ -56,7 +68,7 @@ pub struct StalenessMonitor {
     period_ns: u64,
     inputs: Vec<SignalId>,
     watched: Vec<Watched>,
-    memory: EventMemory,
+    events: MonitorEvents,
     internal_debounce: bool,
     cycle_start_ns: u64,
 }
@@ -65,72 +77,80 @@ impl StalenessMonitor {
     /// Name used in logs and summaries.
     pub const NAME: &'static str = "staleness";
 
-    /// One event per configured signal, resolved against `table`.
-    /// Watches every configured signal except those named in `skip` (the inputs of subsystem
-    /// monitors that do not run on this log).
+    /// One event per configured signal, resolved against `table`. The signals named in
+    /// `watch` are watched (the inputs of the monitors that run); the others keep their event
+    /// but are never tested until [`StalenessMonitor::set_watched`] says so.
     pub fn from_config(
         cfg: &RuntimeConfig,
         table: &SignalTable,
-        skip: &[String],
-    ) -> Result<Self, ReplayError> {
-        let memory =
-            EventMemory::new(&cfg.staleness_memory_config()).map_err(|e| ReplayError::Monitor {
-                monitor: Self::NAME.into(),
-                message: e.to_string(),
-            })?;
+        watch: &[SignalId],
+    ) -> Result<Self, StalenessError> {
+        let names: Vec<String> = cfg
+            .signals
+            .iter()
+            .map(|s| stale_event_name(&s.name))
+            .collect();
+        let specs: Vec<EventSpec<'_>> = cfg
+            .signals
+            .iter()
+            .zip(&names)
+            .map(|(s, name)| EventSpec {
+                name,
+                dtc: &s.stale_dtc,
+                priority: cfg.staleness.priority,
+                debounce: cfg.staleness.debounce,
+            })
+            .collect();
+        let events = MonitorEvents::with_capacity(&specs, cfg.signals.len().max(1))?;
         let mut watched = Vec::with_capacity(cfg.signals.len());
         for (i, s) in cfg.signals.iter().enumerate() {
-            if skip.contains(&s.name) {
-                continue;
-            }
-            let id = table.id(&s.name).ok_or_else(|| ReplayError::Monitor {
-                monitor: Self::NAME.into(),
-                message: format!("signal `{}` is not in the signal table", s.name),
-            })?;
-            let event = memory.event_id_at(i).ok_or_else(|| ReplayError::Monitor {
-                monitor: Self::NAME.into(),
-                message: format!("no event for signal `{}`", s.name),
-            })?;
+            let id = table
+                .id(&s.name)
+                .ok_or_else(|| StalenessError::MissingSignal(s.name.clone()))?;
             watched.push(Watched {
                 id,
-                event,
-                dtc: memory.dtc(event),
+                event: i,
+                dtc: events.dtc(i),
                 name: s.name.clone(),
                 topic: s.topic.clone(),
                 max_age_ns: table.spec(id).max_age_ns,
                 seen: Seen::Fine,
+                active: watch.contains(&id),
                 episodes: 0,
             });
         }
         Ok(StalenessMonitor {
             period_ns: s_to_ns(cfg.staleness.check_period_s),
-            inputs: watched.iter().map(|w| w.id).collect(),
+            inputs: watched.iter().filter(|w| w.active).map(|w| w.id).collect(),
             watched,
-            memory,
+            events,
             internal_debounce: cfg.staleness.debounce == DebounceConfig::MonitorInternal,
             cycle_start_ns: 0,
         })
     }
 
-    fn report(&mut self, k: usize, result: TestResult, now_ns: u64, out: &mut OutputSink<'_>) {
-        let w = &self.watched[k];
-        let before = self.memory.status(w.event);
-        let ctx = ReportContext::at(now_ns as f64 * 1e-9);
-        let res = self
-            .memory
-            .report(w.event, &result, &ctx, |ev| out(Output::Event(&ev)));
-        match res {
-            Ok(after) if after != before => out(Output::DtcStatus {
-                dtc: w.dtc,
-                status: after,
-            }),
-            Ok(_) => {}
-            Err(e) => tracing::error!(
-                monitor = Self::NAME,
-                signal = %w.name,
-                "event memory refused a report: {e}"
-            ),
+    /// Starts or stops watching a signal (its consumer was enabled or disabled). A signal
+    /// that is not watched is not tested: its "no signal" event keeps its status.
+    pub fn set_watched(&mut self, id: SignalId, on: bool) {
+        for w in self.watched.iter_mut().filter(|w| w.id == id) {
+            w.active = on;
+            w.seen = Seen::Fine;
         }
+        self.inputs = self
+            .watched
+            .iter()
+            .filter(|w| w.active)
+            .map(|w| w.id)
+            .collect();
+    }
+
+    /// Stale or missing episodes of a signal so far.
+    pub fn episodes(&self, id: SignalId) -> u64 {
+        self.watched
+            .iter()
+            .filter(|w| w.id == id)
+            .map(|w| w.episodes)
+            .sum()
     }
 }
 
@@ -143,6 +163,7 @@ impl Monitor for StalenessMonitor {
         self.period_ns
     }
 
+    /// The watched signals.
     fn inputs(&self) -> &[SignalId] {
         &self.inputs
     }
@@ -150,8 +171,11 @@ impl Monitor for StalenessMonitor {
     fn step(&mut self, now_ns: u64, signals: &SignalTable, out: &mut OutputSink<'_>) {
         for k in 0..self.watched.len() {
             let w = &self.watched[k];
+            if !w.active {
+                continue;
+            }
             let max_age_s = w.max_age_ns as f64 * 1e-9;
-            let (seen, age_s) = match signals.get(w.id) {
+            let (seen, age_s) = match signals.try_get(w.id) {
                 None => {
                     let since_start = now_ns.saturating_sub(self.cycle_start_ns);
                     if since_start > w.max_age_ns {
@@ -214,7 +238,13 @@ impl Monitor for StalenessMonitor {
                 max: max_age_s,
                 verdict,
             };
-            self.report(k, result, now_ns, out);
+            let values = FreezeValues {
+                signals: Some(signals),
+                estimates: &[],
+            };
+            let event = self.watched[k].event;
+            self.events
+                .report_one(event, now_ns as f64 * 1e-9, &result, &[], values, out);
         }
     }
 
@@ -223,67 +253,47 @@ impl Monitor for StalenessMonitor {
         for w in &mut self.watched {
             w.seen = Seen::Fine;
         }
-        let before: Vec<_> = self
-            .watched
-            .iter()
-            .map(|w| self.memory.status(w.event))
-            .collect();
-        if let Err(e) = self
-            .memory
-            .start_operation_cycle(now_ns as f64 * 1e-9, |ev| out(Output::Event(&ev)))
-        {
-            tracing::error!(
-                monitor = Self::NAME,
-                "cannot start the operation cycle: {e}"
-            );
-        }
-        self.emit_status_changes(&before, out);
+        self.events.start_operation_cycle(now_ns, out);
     }
 
     fn end_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
-        let before: Vec<_> = self
-            .watched
-            .iter()
-            .map(|w| self.memory.status(w.event))
-            .collect();
-        if let Err(e) = self
-            .memory
-            .end_operation_cycle(now_ns as f64 * 1e-9, |ev| out(Output::Event(&ev)))
-        {
-            tracing::error!(monitor = Self::NAME, "cannot end the operation cycle: {e}");
-        }
-        self.emit_status_changes(&before, out);
+        self.events.end_operation_cycle(now_ns, out);
     }
-}
 
-impl StalenessMonitor {
-    fn emit_status_changes(
-        &self,
-        before: &[fdd_diagnostics::dtc::DtcStatus],
-        out: &mut OutputSink<'_>,
-    ) {
-        for (w, b) in self.watched.iter().zip(before) {
-            let after = self.memory.status(w.event);
-            if after != *b {
-                out(Output::DtcStatus {
-                    dtc: w.dtc,
-                    status: after,
-                });
-            }
-        }
+    fn events(&self) -> &MonitorEvents {
+        &self.events
+    }
+
+    fn events_mut(&mut self) -> &mut MonitorEvents {
+        &mut self.events
+    }
+
+    fn set_signal_watched(&mut self, id: SignalId, watched: bool) {
+        self.set_watched(id, watched);
+    }
+
+    /// Every watched signal's latest value.
+    fn default_freeze_frame(&self) -> Vec<String> {
+        self.watched
+            .iter()
+            .filter(|w| w.active)
+            .map(|w| w.name.clone())
+            .collect()
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::monitor::Output;
     use fdd_diagnostics::dtc::StatusBit;
     use fdd_diagnostics::event::DiagnosticEvent;
 
     fn setup() -> (RuntimeConfig, SignalTable, StalenessMonitor) {
         let cfg = RuntimeConfig::load(None).expect("embedded");
         let table = cfg.signal_table().expect("table");
-        let m = StalenessMonitor::from_config(&cfg, &table, &[]).expect("monitor");
+        let all: Vec<SignalId> = table.ids().collect();
+        let m = StalenessMonitor::from_config(&cfg, &table, &all).expect("monitor");
         (cfg, table, m)
     }
 
@@ -295,7 +305,7 @@ mod tests {
         let mut events: Vec<DiagnosticEvent> = Vec::new();
         let mut sink = |o: Output<'_>| {
             if let Output::Event(e) = o {
-                events.push(e.clone());
+                events.push(e.to_event());
             }
         };
         m.start_operation_cycle(0, &mut sink);
@@ -314,7 +324,7 @@ mod tests {
         assert_eq!(failed[0].dtc.ftb, 0x31);
         // Past the 5 ms grace: the first step at 6 ms.
         assert!((failed[0].time_s - 0.006).abs() < 1e-12);
-        assert_eq!(m.watched[2].episodes, 1);
+        assert_eq!(m.episodes(table.id("wattmeter").unwrap()), 1);
     }
 
     #[test]
@@ -324,7 +334,7 @@ mod tests {
         let mut sink = |o: Output<'_>| {
             if let Output::Event(e) = o {
                 if e.bit_changed(StatusBit::TestFailed) {
-                    raised.push((e.event.clone(), e.time_s, e.status_after.test_failed()));
+                    raised.push((e.event.to_string(), e.time_s, e.status_after.test_failed()));
                 }
             }
         };
