@@ -8,6 +8,8 @@
 //!   candidates, or "unknown".
 //! - [`dtc`]: SAE J2012 codes, the ISO 14229-1 status byte, debouncing and an AUTOSAR-Dem-shaped
 //!   event memory that emits [`event::DiagnosticEvent`]s (documented JSON shape).
+//! - [`uds`]: the UDS DTC services (ReadDTCInformation `0x19`, ClearDiagnosticInformation
+//!   `0x14`) answered from any [`uds::DtcStore`], with the byte formats fdd uses.
 //!
 //! Pure logic: no I/O, no clock (time is passed in), no heap allocation per step.
 
@@ -16,6 +18,7 @@ pub mod dtc;
 pub mod error;
 pub mod event;
 pub mod isolation;
+pub mod uds;
 pub mod verdict;
 
 pub use error::ConfigError;

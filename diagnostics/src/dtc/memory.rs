@@ -431,6 +431,12 @@ impl EventMemory {
         &self.defs[id.index()].name
     }
 
+    /// The freeze-frame signals of `id`, in configured order (the order of the values a report
+    /// passes in [`ReportContext::freeze_frame`]).
+    pub fn freeze_frame_signals(&self, id: EventId) -> &[String] {
+        &self.defs[id.index()].freeze_frame
+    }
+
     /// Everything about `id`.
     pub fn event_info(&self, id: EventId) -> EventInfo<'_> {
         let d = &self.defs[id.index()];
