@@ -6,8 +6,8 @@
 //! Sized at construction; a step without a status change allocates nothing.
 
 use fdd_diagnostics::dtc::{
-    DebounceConfig, Dtc, EventConfig, EventId, EventMemory, EventMemoryConfig, MilConfig,
-    ReportContext,
+    DebounceConfig, Dtc, EventConfig, EventId, EventMemory, EventMemoryConfig, MemoryImage,
+    MilConfig, ReportContext, RestoreReport,
 };
 use fdd_diagnostics::event::DiagnosticEvent;
 use fdd_diagnostics::{ConfigError, TestResult, Verdict};
@@ -124,6 +124,23 @@ impl MonitorEvents {
         }
     }
 
+    /// The event memory, read-only (for persistence: [`EventMemory::encode_image`]).
+    pub fn memory(&self) -> &EventMemory {
+        &self.memory
+    }
+
+    /// Restores a persisted image at power-up, before the first operation cycle (see
+    /// [`EventMemory::restore`]). The restored status bytes become the last reported ones, so
+    /// the next step reports only what changes from them; a host that wants the restored
+    /// statuses published reads them from [`MonitorEvents::memory`].
+    pub fn restore(&mut self, image: &MemoryImage) -> RestoreReport {
+        let report = self.memory.restore(image);
+        for (s, &id) in self.statuses.iter_mut().zip(&self.ids) {
+            *s = self.memory.status(id).byte();
+        }
+        report
+    }
+
     /// An operation cycle starts.
     pub fn start_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
         let mut sink = |e: DiagnosticEvent| out(Output::Event(&e));
@@ -207,6 +224,49 @@ mod tests {
             &mut |_| quiet += 1,
         );
         assert_eq!(quiet, 0, "{n} outputs before");
+    }
+
+    #[test]
+    fn a_restored_memory_reports_only_changes_from_the_restored_statuses() {
+        let failed = TestResult {
+            value: 9.0,
+            min: 0.0,
+            max: 5.0,
+            verdict: Verdict::Failed,
+        };
+        let mut ev = MonitorEvents::new(&specs()).expect("valid");
+        for c in 0..2u64 {
+            ev.start_operation_cycle(c * 10_000_000_000, &mut |_| {});
+            let t = c as f64 * 10.0 + 1.0;
+            ev.report(
+                t,
+                &[Verdict::Failed, Verdict::Passed],
+                &failed,
+                &[],
+                &mut |_| {},
+            );
+            ev.end_operation_cycle(c * 10_000_000_000 + 5_000_000_000, &mut |_| {});
+        }
+        let image = ev.memory().image();
+        let mut fresh = MonitorEvents::new(&specs()).expect("valid");
+        assert!(fresh.restore(&image).nothing_dropped());
+        assert!(fresh.memory().status(fresh.ids[0]).confirmed());
+        // Same verdicts after the power-up: the bytes end where they were restored (0xAF,
+        // 0x00), so nothing is reported (without the restored cache: 0x50 -> both).
+        let mut statuses = Vec::new();
+        fresh.start_operation_cycle(0, &mut |_| {});
+        fresh.report(
+            0.5,
+            &[Verdict::Failed, Verdict::Passed],
+            &failed,
+            &[],
+            &mut |o| {
+                if let Output::DtcStatus { status, .. } = o {
+                    statuses.push(status.byte());
+                }
+            },
+        );
+        assert!(statuses.is_empty(), "{statuses:x?}");
     }
 
     #[test]
