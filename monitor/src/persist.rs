@@ -668,18 +668,21 @@ pub struct SectionWriter<'a> {
     count: u32,
 }
 
-/// A section that does not fit the section format.
+/// A section that [`SectionWriter::section`] could not write.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
-pub enum SectionTooLarge {
+pub enum SectionWriteError {
     /// The name is longer than 65535 bytes.
     #[error("section name of {0} bytes is longer than 65535 bytes")]
-    Name(usize),
+    NameTooLong(usize),
     /// The data is longer than `u32::MAX` bytes.
     #[error("section data of {0} bytes is longer than 4 GiB")]
-    Data(usize),
+    DataTooLarge(usize),
     /// More than `u32::MAX` sections.
     #[error("more than 2^32 - 1 sections")]
-    Count,
+    TooMany,
+    /// The fill function removed bytes it had not written; the payload is unusable.
+    #[error("the section's fill function shrank the buffer below the section start")]
+    BufferShrunk,
 }
 
 impl<'a> SectionWriter<'a> {
@@ -700,19 +703,26 @@ impl<'a> SectionWriter<'a> {
         &mut self,
         name: &str,
         fill: impl FnOnce(&mut Vec<u8>),
-    ) -> Result<(), SectionTooLarge> {
-        let name_len = u16::try_from(name.len()).map_err(|_| SectionTooLarge::Name(name.len()))?;
-        let count = self.count.checked_add(1).ok_or(SectionTooLarge::Count)?;
+    ) -> Result<(), SectionWriteError> {
+        let name_len =
+            u16::try_from(name.len()).map_err(|_| SectionWriteError::NameTooLong(name.len()))?;
+        let count = self
+            .count
+            .checked_add(1)
+            .ok_or(SectionWriteError::TooMany)?;
         let start = self.out.len();
         self.out.extend_from_slice(&name_len.to_le_bytes());
         self.out.extend_from_slice(name.as_bytes());
         let len_at = self.out.len();
         self.out.extend_from_slice(&0u32.to_le_bytes());
         fill(self.out);
-        let data_len = self.out.len() - len_at - 4;
+        let Some(data_len) = self.out.len().checked_sub(len_at + 4) else {
+            self.out.truncate(start);
+            return Err(SectionWriteError::BufferShrunk);
+        };
         let Ok(n) = u32::try_from(data_len) else {
             self.out.truncate(start);
-            return Err(SectionTooLarge::Data(data_len));
+            return Err(SectionWriteError::DataTooLarge(data_len));
         };
         self.out[len_at..len_at + 4].copy_from_slice(&n.to_le_bytes());
         self.count = count;
@@ -721,7 +731,10 @@ impl<'a> SectionWriter<'a> {
 
     /// Writes the section count.
     pub fn finish(self) {
-        self.out[self.count_at..self.count_at + 4].copy_from_slice(&self.count.to_le_bytes());
+        // Only missing after a `BufferShrunk` error.
+        if let Some(dst) = self.out.get_mut(self.count_at..self.count_at + 4) {
+            dst.copy_from_slice(&self.count.to_le_bytes());
+        }
     }
 }
 

@@ -334,6 +334,14 @@ fn sections_round_trip_and_bad_input_is_an_error() {
     assert_eq!(e.offset, bytes.len());
     // A huge count in a short input.
     assert!(unpack_sections(&[0xFF, 0xFF, 0xFF, 0xFF]).is_err());
+    // A fill function that eats what it did not write is an error, not a panic.
+    let mut other = Vec::new();
+    let mut w = SectionWriter::new(&mut other);
+    assert_eq!(
+        w.section("bad", |b| b.truncate(1)),
+        Err(fdd_monitor::persist::SectionWriteError::BufferShrunk)
+    );
+    w.finish();
 }
 
 // ------------------------------------------------------------------------------ with images
