@@ -4,12 +4,14 @@
 //!   writes), streamed in log-time order.
 //! - [`signal_table`]: latest value and timestamp per named signal, with staleness detection.
 //! - [`scheduler`] and [`monitor`]: monitors declare their inputs and rate and are stepped at it.
+//! - [`persist`]: the A/B slot store that keeps the event memories across power cycles.
 
 pub mod config;
 pub mod intake;
 pub mod log;
 pub mod monitor;
 pub mod monitor_events;
+pub mod persist;
 pub mod runtime;
 pub mod scheduler;
 pub mod signal_table;

@@ -415,6 +415,19 @@ impl MonitorEvents {
         &mut self.memory
     }
 
+    /// Restores a persisted image into the memory (see
+    /// [`fdd_diagnostics::dtc::EventMemory::restore`]); call it before the first operation
+    /// cycle. The restored status bytes become the last reported ones, so the next step reports
+    /// only what changes from them.
+    pub fn restore(
+        &mut self,
+        image: &fdd_diagnostics::dtc::MemoryImage,
+    ) -> fdd_diagnostics::dtc::RestoreReport {
+        let report = self.memory.restore(image);
+        self.sync_statuses();
+        report
+    }
+
     /// Re-reads the status bytes after the memory was changed through [`Self::memory_mut`].
     pub fn sync_statuses(&mut self) {
         for (i, &id) in self.ids.iter().enumerate() {

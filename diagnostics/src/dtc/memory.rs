@@ -77,6 +77,12 @@ use crate::error::ConfigError;
 use crate::event::{DiagnosticEvent, EventView, FreezeFrameView, MemoryAction, Trigger};
 use crate::verdict::{TestResult, Verdict};
 
+mod image;
+pub use image::{
+    DropReason, Dropped, EntryImage, EventImage, ImageError, ImageErrorKind, MemoryImage,
+    RestoreReport, IMAGE_FORMAT_VERSION, IMAGE_MAGIC,
+};
+
 /// Handle of a configured event: its index in [`EventMemoryConfig::events`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct EventId(u16);

@@ -18,4 +18,8 @@ pub use code::{Dtc, DtcCode, DtcParseError, DtcParseErrorKind, DtcSystem};
 pub use config::{EventConfig, EventMemoryConfig, FreezeFrameUpdate, MilConfig, MilOn};
 pub use debounce::{CounterDebounce, DebounceConfig, Debouncer, Qualified, TimeDebounce};
 pub use memory::{DemError, DtcGroup, EventId, EventInfo, EventMemory, MemoryEntry, ReportContext};
+pub use memory::{
+    DropReason, Dropped, EntryImage, EventImage, ImageError, ImageErrorKind, MemoryImage,
+    RestoreReport, IMAGE_FORMAT_VERSION, IMAGE_MAGIC,
+};
 pub use status::{DtcStatus, StatusBit};

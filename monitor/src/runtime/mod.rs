@@ -56,6 +56,7 @@
 pub mod config;
 mod ingest;
 mod sink;
+pub mod uds;
 
 use std::path::Path;
 
@@ -71,6 +72,7 @@ use crate::staleness::StalenessMonitor;
 pub use config::RuntimeConfig;
 pub use ingest::{QueueStats, QueuedSample, SampleProducer};
 pub use sink::{EstimateRecord, EventQueue, EventRecord, NullSink, Sink, Stamped};
+pub use uds::UdsServer;
 
 use ingest::{IngestionMonitor, Queue};
 
@@ -116,6 +118,9 @@ pub enum RuntimeError {
     /// The event memory refused a call.
     #[error("event memory: {0}")]
     Memory(#[from] DemError),
+    /// The persisted event memory could not be opened or written.
+    #[error("event memory persistence: {0}")]
+    Persist(#[from] crate::persist::PersistError),
 }
 
 /// Extended data of one DTC (UDS 0x19 0x06 records).
@@ -157,9 +162,19 @@ pub struct RuntimeBuilder {
     only: Option<Vec<String>>,
     queues: Vec<QueueSpec>,
     ingestion_period_ns: u64,
+    persistence: Option<std::path::PathBuf>,
 }
 
 impl RuntimeBuilder {
+    /// Keeps the event memory across power cycles in two slot files `<base>.a` / `<base>.b`
+    /// ([`crate::persist::SlotStore`]): restored at construction (what still matches the DTC
+    /// configuration; [`Runtime::restore_notes`] says what was dropped), written at every
+    /// operation-cycle end, when a DTC becomes confirmed and after a ClearDTC.
+    pub fn persistence(mut self, base: impl Into<std::path::PathBuf>) -> Self {
+        self.persistence = Some(base.into());
+        self
+    }
+
     /// Only these of the enabled subsystem monitors are built (the "no signal" monitor always
     /// is, watching the signals of the monitors built).
     pub fn only_monitors(mut self, names: &[&str]) -> Self {
@@ -204,6 +219,16 @@ pub struct Runtime {
     now_ns: Option<u64>,
     cycle_active: bool,
     cycles: u32,
+    store: Option<Persistence>,
+}
+
+/// The persisted event memory: the slot store and a reusable buffer.
+struct Persistence {
+    store: crate::persist::SlotStore,
+    buf: Vec<u8>,
+    notes: Vec<String>,
+    writes: u64,
+    failures: u64,
 }
 
 impl std::fmt::Debug for Runtime {
@@ -225,6 +250,7 @@ impl Runtime {
             only: None,
             queues: Vec::new(),
             ingestion_period_ns: 10_000_000,
+            persistence: None,
         }
     }
 
@@ -336,6 +362,10 @@ impl Runtime {
                 m.events().len()
             );
         }
+        let store = match &b.persistence {
+            None => None,
+            Some(base) => Some(restore(base, &mut sched, &names)?),
+        };
         Ok((
             Runtime {
                 origin,
@@ -348,6 +378,7 @@ impl Runtime {
                 now_ns: None,
                 cycle_active: false,
                 cycles: 0,
+                store,
             },
             producers,
         ))
@@ -400,7 +431,11 @@ impl Runtime {
             now_ns,
             ..
         } = self;
+        let mut confirmed = false;
         let mut out = |i: usize, t: u64, o: crate::monitor::Output<'_>| {
+            if let crate::monitor::Output::Event(e) = o {
+                confirmed |= !e.status_before.confirmed() && e.status_after.confirmed();
+            }
             sink.output(Stamped {
                 t_ns: t,
                 monitor: &names[i],
@@ -434,6 +469,9 @@ impl Runtime {
         }
         ran += sched.run_until(t_ns.saturating_add(1), table, &mut out);
         *now_ns = Some(t_ns);
+        if confirmed {
+            self.persist();
+        }
         Ok(ran)
     }
 
@@ -484,6 +522,7 @@ impl Runtime {
         self.for_each_monitor(t_ns, sink, |m, t, out| m.end_operation_cycle(t, out));
         self.cycle_active = false;
         self.now_ns = Some(t_ns);
+        self.persist();
         tracing::info!(
             "operation cycle {} ends at {:.6} s",
             self.cycles,
@@ -695,7 +734,62 @@ impl Runtime {
             "ClearDTC ({group:?}) at {:.6} s: {total} DTCs",
             t_ns as f64 * 1e-9
         );
+        self.persist();
         Ok(total)
+    }
+
+    // ------------------------------------------------------------------ persistence
+
+    /// Writes the event memory to the older slot now (the runtime also does at cycle end, at
+    /// a confirmation and after a clear). A failure leaves the other slot current; `Ok(false)`
+    /// without persistence.
+    pub fn persist_now(&mut self) -> Result<bool, RuntimeError> {
+        let Some(p) = self.store.as_mut() else {
+            return Ok(false);
+        };
+        p.buf.clear();
+        let mut w = crate::persist::SectionWriter::new(&mut p.buf);
+        for (name, m) in self.names.iter().zip(self.sched.monitors()) {
+            let mem = m.events().memory();
+            if let Err(e) = w.section(name, |b| mem.encode_image(b)) {
+                p.failures += 1;
+                return Err(RuntimeError::Monitor {
+                    origin: self.origin.clone(),
+                    monitor: name.clone(),
+                    message: format!("cannot persist its event memory: {e}"),
+                });
+            }
+        }
+        w.finish();
+        match p.store.write(&p.buf) {
+            Ok(_) => {
+                p.writes += 1;
+                Ok(true)
+            }
+            Err(e) => {
+                p.failures += 1;
+                Err(e.into())
+            }
+        }
+    }
+
+    fn persist(&mut self) {
+        if let Err(e) = self.persist_now() {
+            tracing::error!("{e}");
+        }
+    }
+
+    /// What the restore at construction found and did (slot problems, events dropped because
+    /// the DTC configuration changed); empty without persistence or after a clean restore.
+    pub fn restore_notes(&self) -> &[String] {
+        self.store.as_ref().map_or(&[], |p| p.notes.as_slice())
+    }
+
+    /// Successful and failed writes of the persisted memory so far.
+    pub fn persist_counts(&self) -> (u64, u64) {
+        self.store
+            .as_ref()
+            .map_or((0, 0), |p| (p.writes, p.failures))
     }
 
     // ------------------------------------------------------------------ queues
@@ -709,6 +803,75 @@ impl Runtime {
     pub fn origin(&self) -> &str {
         &self.origin
     }
+}
+
+/// Opens the slot store for the runtime's DTC configuration and restores each monitor's
+/// memory from the current slot.
+fn restore(
+    base: &Path,
+    sched: &mut Scheduler,
+    names: &[String],
+) -> Result<Persistence, RuntimeError> {
+    let mut hasher = crate::persist::ConfigHasher::new();
+    for (i, name) in names.iter().enumerate() {
+        let ev = sched.monitor(i).events();
+        for k in 0..ev.len() {
+            hasher.event(name, ev.name(k), ev.dtc(k));
+        }
+    }
+    let (store, recovered) = crate::persist::SlotStore::open(base, hasher.finish())?;
+    let mut notes: Vec<String> = recovered.notes.iter().map(|n| n.to_string()).collect();
+    if let Some(cur) = &recovered.current {
+        if !cur.config_matches {
+            notes.push(format!(
+                "{}: written for another DTC configuration: restoring the events that still match",
+                cur.path.display()
+            ));
+        }
+        match crate::persist::unpack_sections(&cur.payload) {
+            Err(e) => notes.push(format!("{}: {e}", cur.path.display())),
+            Ok(sections) => {
+                for (section, bytes) in sections {
+                    let Some(i) = names.iter().position(|n| n == section) else {
+                        notes.push(format!(
+                            "{}: monitor `{section}` is not in this runtime: its DTCs are dropped",
+                            cur.path.display()
+                        ));
+                        continue;
+                    };
+                    match fdd_diagnostics::dtc::MemoryImage::decode(bytes) {
+                        Err(e) => {
+                            notes.push(format!("{}: monitor `{section}`: {e}", cur.path.display()))
+                        }
+                        Ok(image) => {
+                            let report = sched.monitor_mut(i).events_mut().restore(&image);
+                            notes.extend(
+                                report
+                                    .dropped
+                                    .iter()
+                                    .map(|d| format!("monitor `{section}`: dropped {d}")),
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        tracing::info!(
+            "event memory restored from {} (seq {})",
+            cur.path.display(),
+            cur.seq
+        );
+    }
+    for n in &notes {
+        tracing::warn!("{n}");
+    }
+    Ok(Persistence {
+        store,
+        buf: Vec::with_capacity(64 * 1024),
+        notes,
+        writes: 0,
+        failures: 0,
+    })
 }
 
 fn event_id(ev: &MonitorEvents, i: usize) -> fdd_diagnostics::dtc::EventId {
