@@ -31,13 +31,18 @@ enum Command {
     /// Simulate a throttle or intake scenario (truth, sensors, injected fault) and write it as
     /// an MCAP log, with the settings of the committed fixtures (same scenario, same bytes).
     Simulate {
-        /// Scenario: a path to a scenario TOML file (its `monitor` key says throttle or intake),
-        /// or the name of a file in fixtures/scenarios (e.g. `throttle_tps_stuck`,
+        /// Scenario: a path to a scenario TOML file, relative to the working directory (its
+        /// `monitor` key says throttle or intake; `.toml` may be left off), or the name of a
+        /// scenario bundled in fdd (`--list` shows them: e.g. `throttle_tps_stuck`,
         /// `intake_leak`).
-        scenario: String,
+        #[arg(required_unless_present = "list")]
+        scenario: Option<String>,
         /// Output MCAP file.
-        #[arg(short, long)]
-        out: PathBuf,
+        #[arg(short, long, required_unless_present = "list")]
+        out: Option<PathBuf>,
+        /// List the bundled scenarios (name, monitor, duration, fault) and exit.
+        #[arg(long, conflicts_with_all = ["scenario", "out"])]
+        list: bool,
     },
     /// Replay an MCAP log through the configured monitors: DTC events, estimates, a summary.
     ///
@@ -130,11 +135,37 @@ fn init_tracing(verbose: u8) {
         .init();
 }
 
+/// Writes to stdout; a closed stdout (`fdd replay ... | head`) is reported as
+/// [`StdoutClosed`] so that `main` ends quietly instead of panicking.
+fn emit(text: &str) -> Result<()> {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(StdoutClosed.into()),
+        Err(e) => Err(anyhow::anyhow!("cannot write to stdout: {e}")),
+    }
+}
+
+/// The reader of stdout went away.
+#[derive(Debug)]
+struct StdoutClosed;
+
+impl std::fmt::Display for StdoutClosed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("stdout closed")
+    }
+}
+
+impl std::error::Error for StdoutClosed {}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     init_tracing(cli.verbose);
     match run(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
+        // The reader of our output is gone (`| head`): nothing left to say to anyone.
+        Err(e) if e.downcast_ref::<StdoutClosed>().is_some() => ExitCode::SUCCESS,
         Err(e) => {
             // fdd's errors name the file, key or setting and include their cause.
             eprintln!("error: {e}");
@@ -159,7 +190,7 @@ fn run(command: Command) -> Result<()> {
                 progress: !no_progress,
             };
             let summary = fdd::replay::replay(&log, &cfg, &opts)?;
-            print!("{}", summary.render());
+            emit(&summary.render())?;
             if let Some(e) = &summary.stopped_early {
                 anyhow::bail!(
                     "replay of {} stopped early: {e} (the summary above covers what was read)",
@@ -168,15 +199,24 @@ fn run(command: Command) -> Result<()> {
             }
             Ok(())
         }
-        Command::Simulate { scenario, out } => {
+        Command::Simulate {
+            scenario,
+            out,
+            list,
+        } => {
+            if list {
+                return emit(&fdd::simulate::list_bundled()?);
+            }
+            let (Some(scenario), Some(out)) = (scenario, out) else {
+                anyhow::bail!("fdd simulate needs a scenario and -o FILE (or --list)");
+            };
             let stats = fdd::simulate::simulate(&scenario, &out)?;
-            println!(
-                "wrote {}: {} frames, {} messages",
+            emit(&format!(
+                "wrote {}: {} frames, {} messages\n",
                 out.display(),
                 stats.frames,
                 stats.messages
-            );
-            Ok(())
+            ))
         }
         Command::Reproduce { what } => match what {
             Reproduce::Table2 {
@@ -194,8 +234,7 @@ fn run(command: Command) -> Result<()> {
                     particles,
                 };
                 let report = table2::run(&cfg, &settings)?;
-                print!("{}", table2::render(&report));
-                Ok(())
+                emit(&table2::render(&report))
             }
             Reproduce::Intake {
                 duration,
@@ -208,8 +247,7 @@ fn run(command: Command) -> Result<()> {
                     egr_pos: egr,
                 };
                 let report = intake::run(&settings)?;
-                print!("{}", intake::render(&report));
-                Ok(())
+                emit(&intake::render(&report))
             }
         },
     }

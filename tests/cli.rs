@@ -1,0 +1,120 @@
+//! The CLI as a user on another machine meets it: bundled scenarios (`fdd simulate --list`,
+//! a name found without the source tree), scenario files relative to the working directory,
+//! no log written over its own scenario, and a closed stdout (`fdd replay ... | head`) ending
+//! the program quietly.
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+
+fn fdd() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_fdd"));
+    c.env_remove("RUST_LOG").env_remove("RUST_BACKTRACE");
+    c
+}
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn bundled_scenarios_are_listed_and_found_outside_the_source_tree() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = fdd()
+        .args(["simulate", "--list"])
+        .current_dir(dir.path())
+        .output()
+        .expect("run");
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    for (name, _) in fdd_fixtures::bundled::BUNDLED {
+        assert!(text.contains(name), "{name} missing from:\n{text}");
+    }
+    assert!(
+        text.contains("throttle_tps_open") && text.contains("tps_open from 10 s"),
+        "{text}"
+    );
+
+    // By name, from a directory without fixtures/: the bundled copy, byte for byte the fixture.
+    let log = dir.path().join("open.mcap");
+    let out = fdd()
+        .args(["simulate", "throttle_tps_open", "-o"])
+        .arg(&log)
+        .current_dir(dir.path())
+        .output()
+        .expect("run");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let want = std::fs::read(root().join("fixtures/data/throttle_tps_open.mcap")).expect("fixture");
+    assert_eq!(std::fs::read(&log).expect("written"), want);
+}
+
+#[test]
+fn a_scenario_file_is_found_relative_to_the_working_directory_and_not_overwritten() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = std::fs::read_to_string(root().join("fixtures/scenarios/throttle_tps_open.toml"))
+        .expect("scenario")
+        .replace("name = \"throttle_tps_open\"", "name = \"throttle_mine\"")
+        .replace("duration_s = 20.0", "duration_s = 2.0")
+        .replace("start_s = 10.0", "start_s = 1.0");
+    std::fs::write(dir.path().join("throttle_mine.toml"), text).expect("write");
+    let out = fdd()
+        .args(["simulate", "throttle_mine", "-o", "mine.mcap"])
+        .current_dir(dir.path())
+        .output()
+        .expect("run");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("2000 frames"));
+
+    let out = fdd()
+        .args(["simulate", "throttle_mine.toml", "-o", "throttle_mine.toml"])
+        .current_dir(dir.path())
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("refusing to write the log over its own scenario file"),
+        "{err}"
+    );
+    assert!(
+        std::fs::read_to_string(dir.path().join("throttle_mine.toml"))
+            .expect("still there")
+            .contains("throttle_mine")
+    );
+
+    let out = fdd()
+        .args(["simulate", "throttle_nope", "-o", "x.mcap"])
+        .current_dir(dir.path())
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("no scenario `throttle_nope`"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_closed_stdout_ends_the_replay_quietly() {
+    let mut child = fdd()
+        .arg("replay")
+        .arg(root().join("fixtures/data/throttle_tps_open.mcap"))
+        .arg("--no-progress")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    // The reader goes away before fdd prints its summary (as `| head -0` would).
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("wait");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(out.status.success(), "{:?}: {err}", out.status);
+}
