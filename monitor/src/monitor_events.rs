@@ -95,6 +95,8 @@ pub struct MonitorEvents {
     /// Scratch for the freeze-frame values of one report.
     ff_buf: Vec<f64>,
     estimate_names: Vec<&'static str>,
+    /// Whether the running operation cycle counts as an aging cycle when it ends.
+    aging_cycle: bool,
 }
 
 #[derive(Debug, Clone)]
@@ -141,6 +143,7 @@ impl MonitorEvents {
             sources: vec![Vec::new(); n],
             ff_buf: Vec::new(),
             estimate_names: Vec::new(),
+            aging_cycle: true,
             memory,
             specs,
             ids,
@@ -373,12 +376,19 @@ impl MonitorEvents {
         self.emit_status_changes(out);
     }
 
+    /// Whether the running operation cycle counts as an aging cycle when it ends (default
+    /// true; a runtime that ages over warm-up cycles sets it from the host's warm-up report).
+    pub fn set_aging_cycle(&mut self, aging_cycle: bool) {
+        self.aging_cycle = aging_cycle;
+    }
+
     /// The operation cycle ends.
     pub fn end_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
-        if let Err(e) = self
-            .memory
-            .end_operation_cycle_view(now_ns as f64 * 1e-9, |e| out(Output::Event(e)))
-        {
+        if let Err(e) = self.memory.end_operation_cycle_aging(
+            now_ns as f64 * 1e-9,
+            self.aging_cycle,
+            |e| out(Output::Event(e)),
+        ) {
             tracing::error!("cannot end the operation cycle: {e}");
         }
         self.emit_status_changes(out);

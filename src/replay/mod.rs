@@ -1,4 +1,6 @@
-//! `fdd replay`: runs the configured monitors over a recorded MCAP log.
+//! `fdd replay`: runs the configured monitors over a recorded MCAP log, as a client of the
+//! runtime a host embeds ([`Runtime`]): it reads the log, pushes samples, advances time and
+//! renders the summary; the ground truth and the summary are the CLI's own.
 //!
 //! # What it does
 //!
@@ -9,12 +11,15 @@
 //!   is resolved once, on first sight, to the signals it feeds (a channel nobody maps is
 //!   counted as ignored); a message then costs one field lookup per mapped signal.
 //! - Before applying a sample stamped `t` it runs every monitor step due before `t`
-//!   ([`Scheduler::run_until`]), then stores the sample in the [`SignalTable`]. An operation
+//!   ([`Runtime::advance_to`]`(t - 1)`), then pushes the sample ([`Runtime::push`]). An operation
 //!   cycle starts at the first message and ends after the last one (steps run up to the last
 //!   time + 1 ns). A forward jump of the log time larger than `replay.max_gap_s` ends the cycle
 //!   and starts a new one, rather than stepping every monitor through the pause.
-//! - Monitors come from [`build_monitors`]: the [`StalenessMonitor`] ("no signal" events,
-//!   FTB 0x31), and the subsystem monitors enabled in `[monitors]`.
+//! - The runtime holds the [`StalenessMonitor`] ("no signal" events, FTB 0x31) and the
+//!   subsystem monitors enabled in `[monitors]` that have at least one input topic in the log
+//!   (for a file without an index the topics come from one pass over it); a log with no
+//!   topic of any enabled monitor runs them all (a mapping error is likelier than a log for
+//!   none of them), so its signals show as missing.
 //! - Outputs go to the sinks ([`ReplayOptions`]): `--events` (one `DiagnosticEvent` JSON per
 //!   line), `--out` (an MCAP with the fdd output topics). Without them no output is serialized.
 //! - Ends with a [`ReplaySummary`].

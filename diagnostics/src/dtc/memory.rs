@@ -825,7 +825,7 @@ impl EventMemory {
     ) -> Result<(), DemError> {
         self.check_time(time_s)?;
         if self.cycle_active {
-            self.end_cycle(time_s, &mut sink);
+            self.end_cycle(time_s, true, &mut sink);
         }
         self.last_time_s = time_s;
         self.cycle_active = true;
@@ -867,6 +867,19 @@ impl EventMemory {
     pub fn end_operation_cycle_view(
         &mut self,
         time_s: f64,
+        sink: impl FnMut(&EventView<'_>),
+    ) -> Result<(), DemError> {
+        self.end_operation_cycle_aging(time_s, true, sink)
+    }
+
+    /// Ends the running operation cycle; `aging_cycle` says whether it also counts as an aging
+    /// cycle. OBD ages a DTC over *warm-up* cycles (AUTOSAR `DemAgingCycleRef` pointing at a
+    /// warm-up cycle): a drive too short to warm the engine up still clears pendingDTC and
+    /// counts towards switching the MIL off, but not towards aging.
+    pub fn end_operation_cycle_aging(
+        &mut self,
+        time_s: f64,
+        aging_cycle: bool,
         mut sink: impl FnMut(&EventView<'_>),
     ) -> Result<(), DemError> {
         self.check_time(time_s)?;
@@ -874,11 +887,11 @@ impl EventMemory {
             return Err(DemError::NoOperationCycle);
         }
         self.last_time_s = time_s;
-        self.end_cycle(time_s, &mut sink);
+        self.end_cycle(time_s, aging_cycle, &mut sink);
         Ok(())
     }
 
-    fn end_cycle(&mut self, time_s: f64, sink: Sink<'_>) {
+    fn end_cycle(&mut self, time_s: f64, aging_cycle: bool, sink: Sink<'_>) {
         self.cycle_active = false;
         for i in 0..self.states.len() {
             let def = &self.defs[i];
@@ -894,12 +907,15 @@ impl EventMemory {
             s.set_mask(DtcStatus::PDTC, false);
             st.failed_cycles = 0;
             if !s.warning_indicator() && (st.slot.is_some() || s.confirmed()) {
-                st.aging_counter = st.aging_counter.saturating_add(1);
-                if st.aging_counter >= def.aging_threshold {
-                    s.set_mask(DtcStatus::CDTC, false);
-                    st.occurrence_counter = 0;
-                    if st.slot.is_some() {
-                        action = MemoryAction::Aged;
+                // Only an aging cycle counts (pendingDTC is cleared above either way).
+                if aging_cycle {
+                    st.aging_counter = st.aging_counter.saturating_add(1);
+                    if st.aging_counter >= def.aging_threshold {
+                        s.set_mask(DtcStatus::CDTC, false);
+                        st.occurrence_counter = 0;
+                        if st.slot.is_some() {
+                            action = MemoryAction::Aged;
+                        }
                     }
                 }
             } else if s.warning_indicator() {

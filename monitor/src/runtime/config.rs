@@ -176,6 +176,27 @@ pub struct FreezeFramesConfig {
     pub events: std::collections::BTreeMap<String, Vec<String>>,
 }
 
+/// Which operation cycles age a DTC (count towards erasing a healed entry).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AgingCycle {
+    /// Every operation cycle that completed the test without failure (the default).
+    #[default]
+    OperationCycle,
+    /// Only cycles in which the host reported a warm-up ([`crate::runtime::Runtime::warm_up_completed`]),
+    /// as OBD ages over warm-up cycles.
+    WarmUpCycle,
+}
+
+/// `[operation_cycles]`: how the host's cycles count.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OperationCyclesConfig {
+    /// `aging = "operation_cycle"` (default) or `"warm_up_cycle"`.
+    #[serde(default)]
+    pub aging: AgingCycle,
+}
+
 /// The whole runtime configuration.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -187,6 +208,9 @@ pub struct RuntimeConfig {
     /// `[freeze_frames]`; absent: each monitor's defaults.
     #[serde(default)]
     pub freeze_frames: FreezeFramesConfig,
+    /// `[operation_cycles]`; absent: every operation cycle is an aging cycle.
+    #[serde(default)]
+    pub operation_cycles: OperationCyclesConfig,
     /// `[[truth]]` tables; absent: [`default_truths`].
     #[serde(default = "default_truths")]
     pub truth: Vec<TruthConfig>,

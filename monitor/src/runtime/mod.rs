@@ -220,6 +220,8 @@ pub struct Runtime {
     cycle_active: bool,
     cycles: u32,
     store: Option<Persistence>,
+    aging: config::AgingCycle,
+    warmed_up: bool,
 }
 
 /// The persisted event memory: the slot store and a reusable buffer.
@@ -379,6 +381,8 @@ impl Runtime {
                 cycle_active: false,
                 cycles: 0,
                 store,
+                aging: cfg.operation_cycles.aging,
+                warmed_up: false,
             },
             producers,
         ))
@@ -495,6 +499,7 @@ impl Runtime {
             self.end_operation_cycle(t_ns, sink)?;
         }
         self.sched.restart(t_ns);
+        self.warmed_up = false;
         self.for_each_monitor(t_ns, sink, |m, t, out| m.start_operation_cycle(t, out));
         self.cycle_active = true;
         self.cycles += 1;
@@ -519,6 +524,10 @@ impl Runtime {
             return Err(RuntimeError::NoOperationCycle);
         }
         self.check_time(t_ns)?;
+        let aging = self.aging == config::AgingCycle::OperationCycle || self.warmed_up;
+        for i in 0..self.sched.len() {
+            self.sched.monitor_mut(i).events_mut().set_aging_cycle(aging);
+        }
         self.for_each_monitor(t_ns, sink, |m, t, out| m.end_operation_cycle(t, out));
         self.cycle_active = false;
         self.now_ns = Some(t_ns);
@@ -529,6 +538,13 @@ impl Runtime {
             t_ns as f64 * 1e-9
         );
         Ok(())
+    }
+
+    /// The host reports that the running operation cycle is a warm-up cycle (OBD: coolant up
+    /// by 22 degC to at least 70 degC). With `[operation_cycles] aging = "warm_up_cycle"` only
+    /// such cycles age DTCs; otherwise this changes nothing.
+    pub fn warm_up_completed(&mut self) {
+        self.warmed_up = true;
     }
 
     /// Whether an operation cycle is running.
