@@ -37,7 +37,8 @@ fn only_aging_cycles_age_a_confirmed_dtc() {
         m.start_operation_cycle_view(t, |_| {}).expect("start");
         m.report_view(id, &result(verdict), &ReportContext::at(t + 0.5), |_| {})
             .expect("report");
-        m.end_operation_cycle_aging(t + 0.9, aging, |_| {}).expect("end");
+        m.end_operation_cycle_aging(t + 0.9, aging, |_| {})
+            .expect("end");
         (m.status(id), m.event_info(id).aging_counter)
     };
     let (s, _) = cycle(&mut m, Verdict::Failed, true);
@@ -53,6 +54,10 @@ fn only_aging_cycles_age_a_confirmed_dtc() {
     assert!(s.confirmed());
     assert_eq!(aging, 1);
     let (s, _) = cycle(&mut m, Verdict::Passed, true);
-    assert!(!s.confirmed(), "aged after 2 aging cycles: {:#04x}", s.byte());
+    assert!(
+        !s.confirmed(),
+        "aged after 2 aging cycles: {:#04x}",
+        s.byte()
+    );
     assert!(m.entry(id).is_none());
 }

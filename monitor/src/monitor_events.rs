@@ -384,11 +384,12 @@ impl MonitorEvents {
 
     /// The operation cycle ends.
     pub fn end_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
-        if let Err(e) = self.memory.end_operation_cycle_aging(
-            now_ns as f64 * 1e-9,
-            self.aging_cycle,
-            |e| out(Output::Event(e)),
-        ) {
+        if let Err(e) =
+            self.memory
+                .end_operation_cycle_aging(now_ns as f64 * 1e-9, self.aging_cycle, |e| {
+                    out(Output::Event(e))
+                })
+        {
             tracing::error!("cannot end the operation cycle: {e}");
         }
         self.emit_status_changes(out);

@@ -526,7 +526,10 @@ impl Runtime {
         self.check_time(t_ns)?;
         let aging = self.aging == config::AgingCycle::OperationCycle || self.warmed_up;
         for i in 0..self.sched.len() {
-            self.sched.monitor_mut(i).events_mut().set_aging_cycle(aging);
+            self.sched
+                .monitor_mut(i)
+                .events_mut()
+                .set_aging_cycle(aging);
         }
         self.for_each_monitor(t_ns, sink, |m, t, out| m.end_operation_cycle(t, out));
         self.cycle_active = false;
