@@ -67,6 +67,11 @@ enum Command {
         /// No progress bar (it is only drawn when stderr is a terminal anyway).
         #[arg(long)]
         no_progress: bool,
+        /// Keep the event memory (status bytes, counters, freeze frames) in the slot files
+        /// FILE.a / FILE.b: restored before the replay, written at its end, so consecutive
+        /// replays are consecutive operation cycles (a DTC failing in two logs is confirmed).
+        #[arg(long, value_name = "FILE")]
+        memory: Option<PathBuf>,
     },
     /// Reproduce a result from one of the source papers.
     Reproduce {
@@ -182,12 +187,14 @@ fn run(command: Command) -> Result<()> {
             out,
             events,
             no_progress,
+            memory,
         } => {
             let cfg = RuntimeConfig::load(config.as_deref())?;
             let opts = ReplayOptions {
                 out,
                 events,
                 progress: !no_progress,
+                memory,
             };
             let summary = fdd::replay::replay(&log, &cfg, &opts)?;
             emit(&summary.render())?;

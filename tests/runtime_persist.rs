@@ -166,3 +166,56 @@ fn the_runtime_answers_uds_dtc_requests() {
     );
     assert!(resp[3..].chunks(4).all(|c| c[3] == 0x50), "{resp:02X?}");
 }
+
+/// `fdd replay --memory FILE`: consecutive replays are consecutive operation cycles of one
+/// vehicle. A TPS open circuit in two logs is confirmed in the second; an intake log replayed
+/// in between (the throttle monitor does not run on it) keeps the throttle DTCs as they were.
+#[test]
+fn replays_with_a_memory_file_act_as_consecutive_drives() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let memory = dir.path().join("vehicle");
+    let fixture =
+        |n: &str| Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("fixtures/data/{n}.mcap"));
+    let status_at_end = |log: &str| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_fdd"))
+            .arg("replay")
+            .arg(fixture(log))
+            .arg("--no-progress")
+            .arg("--memory")
+            .arg(&memory)
+            .env_remove("RUST_LOG")
+            .output()
+            .expect("run fdd");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let first = status_at_end("throttle_tps_open");
+    assert!(
+        first.contains("P0122-16 tps_circuit_low") && first.contains("0x27"),
+        "{first}"
+    );
+    let between = status_at_end("intake_leak");
+    assert!(between.contains("P2279-00"), "{between}");
+    let second = status_at_end("throttle_tps_open");
+    // Confirmed in the second failed cycle, with the MIL on: 0xAF at the end of the log.
+    let line = second
+        .lines()
+        .find(|l| l.contains("P0122-16 tps_circuit_low"))
+        .expect("DTC line");
+    assert!(line.trim_end().to_lowercase().ends_with("0xaf"), "{second}");
+    // The intake DTC survived the throttle replays (its monitor was not in their runtime).
+    let cfg = RuntimeConfig::load(None).expect("embedded");
+    let (rt, _) = Runtime::builder(cfg)
+        .persistence(&memory)
+        .build()
+        .expect("runtime");
+    let leak: Dtc = "P2279-00".parse().expect("dtc");
+    assert!(
+        rt.status(leak).expect("configured").contains(0x20),
+        "testFailedSinceLastClear kept"
+    );
+}

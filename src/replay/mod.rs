@@ -105,6 +105,9 @@ pub struct ReplayOptions {
     pub events: Option<PathBuf>,
     /// Show a progress bar (only drawn when stderr is a terminal).
     pub progress: bool,
+    /// `--memory`: keep the event memory in these slot files (`<base>.a`, `<base>.b`) across
+    /// replays, so consecutive logs act as consecutive operation cycles of one vehicle.
+    pub memory: Option<PathBuf>,
 }
 
 /// A channel, resolved on first sight.
@@ -431,9 +434,14 @@ pub fn replay(
         );
     }
     let run_refs: Vec<&str> = run.iter().map(String::as_str).collect();
-    let (rt, _) = Runtime::builder(cfg.clone())
-        .only_monitors(&run_refs)
-        .build()?;
+    let mut builder = Runtime::builder(cfg.clone()).only_monitors(&run_refs);
+    if let Some(base) = &opts.memory {
+        builder = builder.persistence(base);
+    }
+    let (rt, _) = builder.build()?;
+    for n in rt.restore_notes() {
+        tracing::info!("{}: {n}", file.display());
+    }
     let sig_ids = cfg
         .signals
         .iter()

@@ -228,6 +228,9 @@ pub struct Runtime {
 struct Persistence {
     store: crate::persist::SlotStore,
     buf: Vec<u8>,
+    /// Sections of monitors that are not in this runtime (disabled, or not run on this log),
+    /// written back unchanged so that their DTCs are not lost.
+    carried: Vec<(String, Vec<u8>)>,
     notes: Vec<String>,
     writes: u64,
     failures: u64,
@@ -779,6 +782,16 @@ impl Runtime {
                 });
             }
         }
+        for (name, bytes) in &p.carried {
+            if let Err(e) = w.section(name, |b| b.extend_from_slice(bytes)) {
+                p.failures += 1;
+                return Err(RuntimeError::Monitor {
+                    origin: self.origin.clone(),
+                    monitor: name.clone(),
+                    message: format!("cannot persist its event memory: {e}"),
+                });
+            }
+        }
         w.finish();
         match p.store.write(&p.buf) {
             Ok(_) => {
@@ -840,6 +853,7 @@ fn restore(
     }
     let (store, recovered) = crate::persist::SlotStore::open(base, hasher.finish())?;
     let mut notes: Vec<String> = recovered.notes.iter().map(|n| n.to_string()).collect();
+    let mut carried: Vec<(String, Vec<u8>)> = Vec::new();
     if let Some(cur) = &recovered.current {
         if !cur.config_matches {
             notes.push(format!(
@@ -853,9 +867,10 @@ fn restore(
                 for (section, bytes) in sections {
                     let Some(i) = names.iter().position(|n| n == section) else {
                         notes.push(format!(
-                            "{}: monitor `{section}` is not in this runtime: its DTCs are dropped",
+                            "{}: monitor `{section}` is not in this runtime: its DTCs are kept as they are",
                             cur.path.display()
                         ));
+                        carried.push((section.to_string(), bytes.to_vec()));
                         continue;
                     };
                     match fdd_diagnostics::dtc::MemoryImage::decode(bytes) {
@@ -887,6 +902,7 @@ fn restore(
     Ok(Persistence {
         store,
         buf: Vec::with_capacity(64 * 1024),
+        carried,
         notes,
         writes: 0,
         failures: 0,
