@@ -70,11 +70,16 @@ total_ir() { # annotate file
     awk '/PROGRAM TOTALS/ {gsub(",", "", $1); print $1; exit}' "$1"
 }
 
-# Inclusive Ir of a function symbol (the entry that names the binary, not an inlined part).
+# Inclusive Ir of a function: callgrind_annotate lists a function once per source file its
+# code comes from (inlined code counts under its own file too); the whole function is the
+# largest of those entries.
 fn_ir() { # annotate file, function name
     awk -v fn="$2" '
-        index($0, ":" fn " [") { gsub(",", "", $1); print $1; found = 1; exit }
-        END { if (!found) print 0 }' "$1"
+        { line = $0; sub(/ \[[^]]*\]$/, "", line) }
+        substr(line, length(line) - length(fn)) == ":" fn {
+            v = $1; gsub(",", "", v); if (v + 0 > max) max = v + 0
+        }
+        END { printf "%d\n", max }' "$1"
 }
 
 echo "==> callgrind: $bin replay $long"
