@@ -47,26 +47,23 @@ fn parse_flat_truth<'a>(data: &'a [u8], field: &str) -> Option<TruthMsg<'a>> {
     let (mut fault, mut active, mut observable, mut value) = (None, None, None, f64::NAN);
     let field = field.as_bytes();
     let mut obj = FlatObject::new(data).ok()?;
-    while let Some((key, v)) = obj.next_member().ok()? {
-        let fault_key = match key.len() {
-            5 => key == b"fault",
-            12 => key == b"fault_active",
-            16 => key == b"fault_observable",
-            _ => false,
-        };
-        if fault_key {
-            match (key.len(), v) {
-                (5, FlatValue::Str(s)) => fault = Some(s),
-                (12, FlatValue::Bool(b)) => active = Some(b),
-                (16, FlatValue::Bool(b)) => observable = Some(b),
-                // The general path names the error.
-                _ => return None,
+    while let Some(key) = obj.next_key().ok()? {
+        let v = obj.value().ok()?;
+        // The fault keys first, as the general path; a wrong type is for it to name.
+        match (key.len(), v) {
+            (5, FlatValue::Str(s)) if key == b"fault" => fault = Some(s),
+            (12, FlatValue::Bool(b)) if key == b"fault_active" => active = Some(b),
+            (16, FlatValue::Bool(b)) if key == b"fault_observable" => observable = Some(b),
+            (5 | 12 | 16, _) if matches!(key, b"fault" | b"fault_active" | b"fault_observable") => {
+                return None
             }
-        } else if key == field {
-            value = match v {
-                FlatValue::Number(n) => n.to_f64()?,
-                _ => f64::NAN,
-            };
+            _ if key == field => {
+                value = match v {
+                    FlatValue::Number(n) => n.to_f64()?,
+                    _ => f64::NAN,
+                }
+            }
+            _ => {}
         }
     }
     Some(TruthMsg {

@@ -40,46 +40,40 @@ pub enum FlatValue<'a> {
     Str(&'a [u8]),
 }
 
-/// A number of a [`FlatObject`]: where its parts are in the message.
+/// A number of a [`FlatObject`]: its text and its parts, read in the same pass.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FlatNumber<'a> {
-    json: &'a [u8],
-    /// At the `-` or the first digit.
-    start: usize,
-    int_start: usize,
-    int_end: usize,
-    /// The fraction digits (empty without a `.`).
-    frac_start: usize,
-    frac_end: usize,
-    /// At the `e` / `E`, or `end` without an exponent.
-    exp_at: usize,
-    end: usize,
+    text: &'a [u8],
+    /// The integer and fraction digits as one integer (when `short`).
+    significand: u64,
+    /// Index of the `e` / `E` in `text`, or its length without an exponent.
+    exp_at: u32,
+    frac_digits: u8,
+    negative: bool,
+    /// At most 19 integer and fraction digits: `significand` holds them (else serde_json's
+    /// digit-by-digit rules apply).
+    short: bool,
 }
 
-/// Pulls the members of a flat object one by one (see the [module documentation](self)).
+/// Reads the members of a flat object in order (see the [module documentation](self)): a key
+/// with [`next_key`](Self::next_key), then its value with [`value`](Self::value), until
+/// `next_key` says the object is closed.
 ///
 /// ```
 /// use fdd_monitor::log::flat_json::{FlatObject, FlatValue};
 /// let mut obj = FlatObject::new(br#"{"voltage_v":1.25,"ok":true}"#).unwrap();
-/// let (key, value) = obj.next_member().unwrap().unwrap();
-/// assert_eq!(key, b"voltage_v");
-/// assert!(matches!(value, FlatValue::Number(n) if n.to_f64() == Some(1.25)));
-/// assert_eq!(obj.next_member().unwrap().unwrap(), (&b"ok"[..], FlatValue::Bool(true)));
-/// assert_eq!(obj.next_member(), Ok(None));
+/// assert_eq!(obj.next_key(), Ok(Some(&b"voltage_v"[..])));
+/// assert!(matches!(obj.value(), Ok(FlatValue::Number(n)) if n.to_f64() == Some(1.25)));
+/// assert_eq!(obj.next_member(), Ok(Some((&b"ok"[..], FlatValue::Bool(true)))));
+/// assert_eq!(obj.next_key(), Ok(None));
 /// ```
 #[derive(Debug, Clone)]
 pub struct FlatObject<'a> {
     b: &'a [u8],
-    /// At the next member's `"`, or at the `,` or `}` after a member (whitespace skipped).
+    /// At the first key's `"`, at a value, or at the `,` or `}` after a value (whitespace
+    /// skipped).
     i: usize,
-    state: State,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum State {
-    First,
-    AfterMember,
-    Done,
+    first: bool,
 }
 
 impl<'a> FlatObject<'a> {
@@ -93,30 +87,30 @@ impl<'a> FlatObject<'a> {
         Ok(Self {
             b: json,
             i: skip_ws(json, i + 1),
-            state: State::First,
+            first: true,
         })
     }
 
-    /// The next member (duplicate keys included, in order), `Ok(None)` after the last one once
-    /// the object is closed and nothing but whitespace follows, `Err(NotFlat)` as soon as the
-    /// text is anything else; what was yielded before must then be discarded.
-    #[inline]
-    pub fn next_member(&mut self) -> Result<Option<(&'a [u8], FlatValue<'a>)>, NotFlat> {
+    /// The next key, positioned at its value; `Ok(None)` when the object is closed and nothing
+    /// but whitespace follows (then do not call again); `Err(NotFlat)` as soon as the text is
+    /// anything else, and what was read before must then be discarded.
+    #[inline(always)]
+    pub fn next_key(&mut self) -> Result<Option<&'a [u8]>, NotFlat> {
         let b = self.b;
         let mut i = self.i;
-        match (self.state, b.get(i)) {
-            (State::Done, _) => return Ok(None),
-            (State::First | State::AfterMember, Some(b'}')) => {
-                if skip_ws(b, i + 1) != b.len() {
-                    return Err(NotFlat);
-                }
-                self.state = State::Done;
-                return Ok(None);
+        match b.get(i) {
+            Some(b'"') if self.first => {}
+            Some(b',') if !self.first => i = skip_ws(b, i + 1),
+            Some(b'}') => {
+                return if skip_ws(b, i + 1) == b.len() {
+                    Ok(None)
+                } else {
+                    Err(NotFlat)
+                };
             }
-            (State::AfterMember, Some(b',')) => i = skip_ws(b, i + 1),
-            (State::AfterMember, _) => return Err(NotFlat),
-            (State::First, _) => {}
+            _ => return Err(NotFlat),
         }
+        self.first = false;
         if b.get(i) != Some(&b'"') {
             return Err(NotFlat);
         }
@@ -126,36 +120,40 @@ impl<'a> FlatObject<'a> {
         if b.get(i) != Some(&b':') {
             return Err(NotFlat);
         }
-        i = skip_ws(b, i + 1);
-        let value = match b.get(i) {
+        self.i = skip_ws(b, i + 1);
+        Ok(Some(key))
+    }
+
+    /// The value after the key [`next_key`](Self::next_key) returned.
+    #[inline(always)]
+    pub fn value(&mut self) -> Result<FlatValue<'a>, NotFlat> {
+        let b = self.b;
+        let i = self.i;
+        let (value, end) = match b.get(i) {
             Some(b'-' | b'0'..=b'9') => {
                 let n = scan_number(b, i).ok_or(NotFlat)?;
-                i = n.end;
-                FlatValue::Number(n)
+                (FlatValue::Number(n), i + n.text.len())
             }
             Some(b'"') => {
                 let end = plain_string_end::<false>(b, i + 1).ok_or(NotFlat)?;
-                let s = &b[i + 1..end];
-                i = end + 1;
-                FlatValue::Str(s)
+                (FlatValue::Str(&b[i + 1..end]), end + 1)
             }
-            Some(b'n') if b.get(i..i + 4) == Some(b"null") => {
-                i += 4;
-                FlatValue::Null
-            }
-            Some(b't') if b.get(i..i + 4) == Some(b"true") => {
-                i += 4;
-                FlatValue::Bool(true)
-            }
-            Some(b'f') if b.get(i..i + 5) == Some(b"false") => {
-                i += 5;
-                FlatValue::Bool(false)
-            }
+            Some(b'n') if b.get(i..i + 4) == Some(b"null") => (FlatValue::Null, i + 4),
+            Some(b't') if b.get(i..i + 4) == Some(b"true") => (FlatValue::Bool(true), i + 4),
+            Some(b'f') if b.get(i..i + 5) == Some(b"false") => (FlatValue::Bool(false), i + 5),
             _ => return Err(NotFlat),
         };
-        self.i = skip_ws(b, i);
-        self.state = State::AfterMember;
-        Ok(Some((key, value)))
+        self.i = skip_ws(b, end);
+        Ok(value)
+    }
+
+    /// [`next_key`](Self::next_key) and [`value`](Self::value) together.
+    #[inline]
+    pub fn next_member(&mut self) -> Result<Option<(&'a [u8], FlatValue<'a>)>, NotFlat> {
+        match self.next_key()? {
+            Some(key) => Ok(Some((key, self.value()?))),
+            None => Ok(None),
+        }
     }
 }
 
@@ -179,7 +177,7 @@ pub fn single_number_member(json: &[u8], key: &[u8]) -> Option<f64> {
         return None;
     }
     let number = scan_number(json, k + 4)?;
-    if number.end != n - 1 {
+    if k + 4 + number.text.len() != n - 1 {
         return None;
     }
     number.to_f64()
@@ -287,30 +285,40 @@ fn first_flagged(mask: u64) -> usize {
 /// a key that a dotted path could be confused with).
 #[inline(always)]
 fn plain_string_end<const KEY: bool>(b: &[u8], mut i: usize) -> Option<usize> {
-    loop {
-        let x = word_at(b, i);
+    let stops = |x: u64| {
         let mut stops = string_stops(x);
         if KEY {
             stops |= eq_bytes(x, b'.');
         }
-        if stops != 0 {
-            let end = i + first_flagged(stops);
-            return (b.get(end) == Some(&b'"')).then_some(end);
+        stops
+    };
+    // Whole words, then the last bytes as one word padded with zeros (which stop).
+    while let Some(w) = b.get(i..i + 8) {
+        let x = u64::from_le_bytes(w.try_into().unwrap_or([0; 8]));
+        let m = stops(x);
+        if m != 0 {
+            let end = i + first_flagged(m);
+            return (b[end] == b'"').then_some(end);
         }
         i += 8;
     }
+    let m = stops(word_at(b, i));
+    let end = i + first_flagged(m);
+    (b.get(end) == Some(&b'"')).then_some(end)
 }
 
 /// The end of the run of ASCII digits starting at `i`.
 #[inline(always)]
 fn digits_end(b: &[u8], mut i: usize) -> usize {
-    loop {
-        let stops = non_digits(word_at(b, i));
-        if stops != 0 {
-            return i + first_flagged(stops);
+    while let Some(w) = b.get(i..i + 8) {
+        let m = non_digits(u64::from_le_bytes(w.try_into().unwrap_or([0; 8])));
+        if m != 0 {
+            return i + first_flagged(m);
         }
         i += 8;
     }
+    // The last bytes, padded with zeros (which are not digits).
+    i + first_flagged(non_digits(word_at(b, i)))
 }
 
 /// The value of the `k` (1..=8) ASCII digits at the low end of `x`.
@@ -323,8 +331,8 @@ fn digits8_value(x: u64, k: usize) -> u64 {
     ((x & 0x0000_FFFF_0000_FFFF).wrapping_mul(42_949_672_960_001)) >> 32
 }
 
-/// `10^k` for `k` in 0..=8.
-const POW10_U64: [u64; 9] = [
+/// `10^k` for `k` in 0..=19.
+const POW10_U64: [u64; 20] = [
     1,
     10,
     100,
@@ -334,45 +342,73 @@ const POW10_U64: [u64; 9] = [
     1_000_000,
     10_000_000,
     100_000_000,
+    1_000_000_000,
+    10_000_000_000,
+    100_000_000_000,
+    1_000_000_000_000,
+    10_000_000_000_000,
+    100_000_000_000_000,
+    1_000_000_000_000_000,
+    10_000_000_000_000_000,
+    100_000_000_000_000_000,
+    1_000_000_000_000_000_000,
+    10_000_000_000_000_000_000,
 ];
 
-/// `v * 10^n + ` the value of the `n` ASCII digits at `b[i..]`, for a total of at most 19
-/// digits (no overflow).
+/// The run of ASCII digits starting at `i`: where it ends, and its value (exact when the run
+/// has at most 19 digits; wrapped otherwise).
 #[inline(always)]
-fn append_digits(mut v: u64, b: &[u8], mut i: usize, mut n: usize) -> u64 {
-    while n > 0 {
-        let k = n.min(8);
-        v = v * POW10_U64[k] + digits8_value(word_at(b, i), k);
-        i += k;
-        n -= k;
+fn digit_run(b: &[u8], mut i: usize) -> (usize, u64) {
+    let mut v: u64 = 0;
+    let tail = |v: u64, i: usize, x: u64| {
+        let k = first_flagged(non_digits(x));
+        if k == 0 {
+            return (i, v);
+        }
+        (
+            i + k,
+            v.wrapping_mul(POW10_U64[k])
+                .wrapping_add(digits8_value(x, k)),
+        )
+    };
+    while let Some(w) = b.get(i..i + 8) {
+        let x = u64::from_le_bytes(w.try_into().unwrap_or([0; 8]));
+        if non_digits(x) != 0 {
+            return tail(v, i, x);
+        }
+        v = v
+            .wrapping_mul(100_000_000)
+            .wrapping_add(digits8_value(x, 8));
+        i += 8;
     }
-    v
+    // The last bytes, padded with zeros (which are not digits).
+    tail(v, i, word_at(b, i))
 }
 
-/// The JSON number starting at `i` (a `-` or a digit), when its syntax is valid up to where it
-/// ends. (A digit right after a leading `0` ends the number; the caller then finds no `,` or
-/// `}`.)
+/// The JSON number starting at `start` (a `-` or a digit), when its syntax is valid up to
+/// where it ends. (A digit right after a leading `0` ends the number; the caller then finds no
+/// `,` or `}`.)
 #[inline(always)]
 fn scan_number(b: &[u8], start: usize) -> Option<FlatNumber<'_>> {
-    let int_start = if b.get(start) == Some(&b'-') {
-        start + 1
-    } else {
-        start
-    };
-    let int_end = match b.get(int_start)? {
-        b'0' => int_start + 1,
-        b'1'..=b'9' => digits_end(b, int_start + 1),
+    let negative = b.get(start) == Some(&b'-');
+    let int_start = start + usize::from(negative);
+    let (int_end, int_value) = match b.get(int_start)? {
+        b'0' => (int_start + 1, 0),
+        b'1'..=b'9' => digit_run(b, int_start),
         _ => return None,
     };
-    let (frac_start, frac_end) = if b.get(int_end) == Some(&b'.') {
-        let end = digits_end(b, int_end + 1);
+    let (frac_end, frac_value) = if b.get(int_end) == Some(&b'.') {
+        let (end, v) = digit_run(b, int_end + 1);
         if end == int_end + 1 {
             return None;
         }
-        (int_end + 1, end)
+        (end, v)
     } else {
-        (int_end, int_end)
+        (int_end, 0)
     };
+    let int_digits = int_end - int_start;
+    let frac_digits = frac_end - (int_end + usize::from(frac_end > int_end));
+    let short = int_digits + frac_digits <= 19;
     let exp_at = frac_end;
     let mut end = frac_end;
     if let Some(b'e' | b'E') = b.get(end) {
@@ -386,22 +422,28 @@ fn scan_number(b: &[u8], start: usize) -> Option<FlatNumber<'_>> {
         }
         end = digits;
     }
+    // (A number of more than 4 GB goes digit by digit too.)
+    let exp_at = u32::try_from(exp_at - start).ok();
+    let short = short && exp_at.is_some();
     Some(FlatNumber {
-        json: b,
-        start,
-        int_start,
-        int_end,
-        frac_start,
-        frac_end,
-        exp_at,
-        end,
+        text: &b[start..end],
+        significand: if short {
+            int_value * POW10_U64[frac_digits] + frac_value
+        } else {
+            0
+        },
+        exp_at: exp_at.unwrap_or(0),
+        // At most 19 when `short` (the only case it is read).
+        frac_digits: frac_digits as u8,
+        negative,
+        short,
     })
 }
 
 impl<'a> FlatNumber<'a> {
     /// The number's text.
     pub fn text(&self) -> &'a [u8] {
-        &self.json[self.start..self.end]
+        self.text
     }
 
     /// Its value as serde_json (without `float_roundtrip`) reads it, for a value deserialized
@@ -410,30 +452,22 @@ impl<'a> FlatNumber<'a> {
     /// number out of the `f64` range (serde_json's error).
     #[inline]
     pub fn to_f64(&self) -> Option<f64> {
-        let b = self.json;
-        let positive = self.int_start == self.start;
-        let int_digits = self.int_end - self.int_start;
-        let frac_digits = self.frac_end - self.frac_start;
-        if int_digits + frac_digits > 19 {
+        if !self.short {
             // The significand may not fit: serde_json's own digit-by-digit rules.
-            return number_f64_by_digits(self.text());
+            return number_f64_by_digits(self.text);
         }
-        let significand = append_digits(
-            append_digits(0, b, self.int_start, int_digits),
-            b,
-            self.frac_start,
-            frac_digits,
-        );
+        let positive = !self.negative;
         // At most 19 fraction digits.
-        let mut exponent = -(frac_digits as i32);
-        if self.exp_at != self.end {
-            exponent = apply_exponent(exponent, b.get(self.exp_at + 1..self.end)?)?;
-        } else if frac_digits == 0 {
+        let mut exponent = -i32::from(self.frac_digits);
+        let exp_at = self.exp_at as usize;
+        if exp_at < self.text.len() {
+            exponent = apply_exponent(exponent, self.text.get(exp_at + 1..)?)?;
+        } else if self.frac_digits == 0 {
             // serde_json: U64(s) as f64; I64(-s) as f64 or -(s as f64): the same value.
-            let f = significand as f64;
+            let f = self.significand as f64;
             return Some(if positive { f } else { -f });
         }
-        f64_from_parts(positive, significand, exponent)
+        f64_from_parts(positive, self.significand, exponent)
     }
 }
 
@@ -487,7 +521,7 @@ pub fn number_f64(text: &[u8]) -> Option<f64> {
         _ => return None,
     }
     let n = scan_number(text, 0)?;
-    if n.end != text.len() {
+    if n.text.len() != text.len() {
         return None;
     }
     n.to_f64()
@@ -821,14 +855,11 @@ mod tests {
                 let text = format!("{head}{digits}{tail}");
                 let b = text.as_bytes();
                 let i = head.len();
-                prop_assert_eq!(digits_end(b, i), i + digits.len() + digits_end_naive(&b[i + digits.len()..]));
+                let end = i + digits.len();
+                prop_assert_eq!(digits_end(b, i), end);
                 let expected: u64 = digits.parse().unwrap();
-                prop_assert_eq!(append_digits(0, b, i, digits.len()), expected);
+                prop_assert_eq!(digit_run(b, i), (end, expected));
             }
-        }
-
-        fn digits_end_naive(b: &[u8]) -> usize {
-            b.iter().take_while(|c| c.is_ascii_digit()).count()
         }
     }
 }

@@ -234,6 +234,7 @@ impl MsgRef<'_> {
         }
     }
 
+    #[inline]
     fn field_f64(&self, path: &str) -> Result<f64, LogError> {
         json_field_f64(self.data, path).map_err(|e| match e {
             FieldLookupError::Json(source) => self.json_error(source),
@@ -257,6 +258,7 @@ impl MsgRef<'_> {
 }
 
 impl<'a> LogMessage<'a> {
+    #[inline]
     fn msg_ref(&self) -> MsgRef<'a> {
         MsgRef {
             file: self.file,
