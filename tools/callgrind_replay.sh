@@ -38,18 +38,20 @@ sed -e "s/^name = .*/name = \"$name\"/" \
     fixtures/scenarios/throttle_nominal.toml >"$scenario"
 "$bin" simulate "$scenario" -o "$short" >/dev/null
 
-# Components: label and the function whose inclusive cost is the component's. Indented labels
-# are parts of the component above them (not added again to the total).
+# Components: label and the function whose inclusive cost is the component's.
 components=(
     "MCAP reading|fdd_monitor::log::reader::LogReader::next_message"
     "JSON field parsing (signals)|fdd_monitor::log::reader::LogMessage::field_f64"
     "truth parsing|fdd::replay::truth::parse_truth"
     "throttle monitor|<fdd_monitor::throttle::ThrottleMonitor as fdd_monitor::monitor::Monitor>::step"
-    "  UKF predict (2 filters)|fdd_estimators::ukf::Ukf<T,O,_,_,_,_>::predict"
-    "  UKF update (2 filters)|fdd_estimators::ukf::Ukf<T,O,_,_,_,_>::update_subset"
-    "  event reporting|fdd_monitor::monitor_events::MonitorEvents::report"
-    "  outputs to the sinks|fdd::replay::sinks::Sinks::on_output"
     "staleness monitor|<fdd::replay::staleness::StalenessMonitor as fdd_monitor::monitor::Monitor>::step"
+)
+# Parts of the throttle monitor: label and the callee whose calls from its step are counted.
+throttle_parts=(
+    "UKF predict (2 filters)|fdd_estimators::ukf::Ukf<T,O,_,_,_,_>::predict"
+    "UKF update (2 filters)|fdd_estimators::ukf::Ukf<T,O,_,_,_,_>::update_subset"
+    "event reporting|fdd_monitor::monitor_events::MonitorEvents::report"
+    "outputs to the sinks|fdd::replay::Replayer::start_cycle::{{closure}}"
 )
 
 profile() { # tag log
@@ -60,6 +62,8 @@ profile() { # tag log
     }
     callgrind_annotate --inclusive=yes --threshold=100 "$work/$1.callgrind" \
         >"$work/$1.annotate" 2>/dev/null
+    callgrind_annotate --inclusive=yes --threshold=100 --tree=calling "$work/$1.callgrind" \
+        >"$work/$1.tree" 2>/dev/null
 }
 
 frames() { # summary file
@@ -82,6 +86,24 @@ fn_ir() { # annotate file, function name
         END { printf "%d\n", max }' "$1"
 }
 
+# Ir of the calls to `callee` from `caller` (from its every entry, inlined parts included).
+callee_ir() { # tree file, caller, callee
+    awk -v caller="$2" -v callee="$3" '
+        function name(line) {
+            sub(/^ *[0-9,]+ +\([^)]*\) +[*>] +/, "", line)
+            sub(/ \[[^]]*\]$/, "", line)
+            sub(/ \([0-9,]+x\)$/, "", line)
+            sub(/^[^:]*:/, "", line)
+            return line
+        }
+        /^ *[0-9,]+ .*  \*  / { in_caller = (name($0) == caller); next }
+        /^$/ { in_caller = 0 }
+        in_caller && /^ *[0-9,]+ .*  >  / && name($0) == callee {
+            v = $1; gsub(",", "", v); sum += v
+        }
+        END { printf "%d\n", sum }' "$1"
+}
+
 echo "==> callgrind: $bin replay $long"
 profile long "$long"
 echo "==> callgrind: $bin replay $short"
@@ -102,19 +124,24 @@ per_frame=$(awk -v a="$ir_long" -v b="$ir_short" -v f="$df" 'BEGIN {printf "%.0f
 echo "instructions per frame: $per_frame   ((Ir(120 s) - Ir(20 s)) / $df frames)"
 echo
 printf '%-32s %10s %7s\n' "component (inclusive)" "Ir/frame" "share"
-counted=0
-for c in "${components[@]}"; do
-    label=${c%%|*}
-    fn=${c#*|}
-    a=$(fn_ir "$work/long.annotate" "$fn")
-    b=$(fn_ir "$work/short.annotate" "$fn")
-    d=$((a - b))
-    case $label in
-        " "*) ;;
-        *) counted=$((counted + d)) ;;
-    esac
-    awk -v l="$label" -v d="$d" -v f="$df" -v t="$per_frame" \
+row() { # label, Ir difference
+    awk -v l="$1" -v d="$2" -v f="$df" -v t="$per_frame" \
         'BEGIN {printf "%-32s %10.0f %6.1f%%\n", l, d / f, 100 * d / f / t}'
+}
+counted=0
+throttle=${components[3]#*|}
+for c in "${components[@]}"; do
+    fn=${c#*|}
+    d=$(($(fn_ir "$work/long.annotate" "$fn") - $(fn_ir "$work/short.annotate" "$fn")))
+    counted=$((counted + d))
+    row "${c%%|*}" "$d"
+    if [ "$fn" = "$throttle" ]; then
+        for p in "${throttle_parts[@]}"; do
+            callee=${p#*|}
+            d=$(($(callee_ir "$work/long.tree" "$fn" "$callee") - $(callee_ir "$work/short.tree" "$fn" "$callee")))
+            row "  ${p%%|*}" "$d"
+        done
+    fi
 done
 awk -v d="$((ir_long - ir_short - counted))" -v f="$df" -v t="$per_frame" \
     'BEGIN {printf "%-32s %10.0f %6.1f%%\n", "the rest", d / f, 100 * d / f / t}'
