@@ -6,6 +6,7 @@
 use std::borrow::Cow;
 use std::fmt;
 
+use fdd_monitor::log::flat_json::{FlatObject, FlatValue};
 use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, Visitor};
 use serde::Deserializer;
 
@@ -22,10 +23,60 @@ pub(crate) struct TruthMsg<'a> {
 }
 
 /// Parses `data` (a JSON object with `fault`, `fault_active` and the top-level `field`).
+///
+/// A flat object (every truth message fdd writes) takes a fast path
+/// ([`fdd_monitor::log::flat_json`]) with the same result, bit for bit; anything else, and
+/// every error, goes through serde_json.
+#[inline(never)]
 pub(crate) fn parse_truth<'a>(
     data: &'a [u8],
     field: &str,
 ) -> Result<TruthMsg<'a>, serde_json::Error> {
+    match parse_flat_truth(data, field) {
+        Some(msg) => Ok(msg),
+        None => parse_truth_general(data, field),
+    }
+}
+
+/// The fast path of [`parse_truth`]: `None` when `data` is not a flat object, a fault field is
+/// missing or of the wrong type (serde_json then names the error), or the number is one
+/// `fdd_monitor::log::flat_json::number_f64` leaves to serde_json. As the general path: for a
+/// repeated key the last one wins, and the fault keys take precedence over `field`.
+#[inline]
+fn parse_flat_truth<'a>(data: &'a [u8], field: &str) -> Option<TruthMsg<'a>> {
+    let (mut fault, mut active, mut observable, mut value) = (None, None, None, f64::NAN);
+    let field = field.as_bytes();
+    let mut obj = FlatObject::new(data).ok()?;
+    while let Some(key) = obj.next_key().ok()? {
+        let v = obj.value().ok()?;
+        // The fault keys first, as the general path; a wrong type is for it to name.
+        match (key.len(), v) {
+            (5, FlatValue::Str(s)) if key == b"fault" => fault = Some(s),
+            (12, FlatValue::Bool(b)) if key == b"fault_active" => active = Some(b),
+            (16, FlatValue::Bool(b)) if key == b"fault_observable" => observable = Some(b),
+            (5 | 12 | 16, _) if matches!(key, b"fault" | b"fault_active" | b"fault_observable") => {
+                return None
+            }
+            _ if key == field => {
+                value = match v {
+                    FlatValue::Number(n) => n.to_f64()?,
+                    _ => f64::NAN,
+                }
+            }
+            _ => {}
+        }
+    }
+    Some(TruthMsg {
+        // Printable ASCII, so always UTF-8.
+        fault: Cow::Borrowed(std::str::from_utf8(fault?).ok()?),
+        fault_active: active?,
+        fault_observable: observable,
+        value,
+    })
+}
+
+/// [`parse_truth`] by serde_json, for any JSON.
+fn parse_truth_general<'a>(data: &'a [u8], field: &str) -> Result<TruthMsg<'a>, serde_json::Error> {
     let mut de = serde_json::Deserializer::from_slice(data);
     let msg = TruthSeed { field }.deserialize(&mut de)?;
     de.end()?;
@@ -188,5 +239,152 @@ mod tests {
         assert!(parse_truth(br#"{"fault": "x", "fault_active": 3}"#, "a").is_err());
         assert!(parse_truth(br#"{"fault": "x", "fault_active": true"#, "a").is_err());
         assert!(parse_truth(br#"{"fault": "x", "fault_active": true} x"#, "a").is_err());
+    }
+
+    /// The fast path against serde_json, on generated and mutated inputs.
+    mod fast_path_is_serde_json {
+        use super::super::*;
+        use fdd_monitor::log::ThrottleTruth;
+        use proptest::prelude::*;
+
+        /// A comparable form of a parse's outcome (the value by its bits).
+        fn outcome(r: &Result<TruthMsg<'_>, serde_json::Error>) -> String {
+            match r {
+                Ok(m) => format!(
+                    "ok {:?} borrowed={} {} {:?} {:016x}",
+                    m.fault,
+                    matches!(m.fault, Cow::Borrowed(_)),
+                    m.fault_active,
+                    m.fault_observable,
+                    m.value.to_bits()
+                ),
+                Err(e) => format!("error {e}"),
+            }
+        }
+
+        fn value_text() -> impl Strategy<Value = String> {
+            prop_oneof![
+                4 => any::<f64>().prop_map(|x| serde_json::to_string(&x).unwrap()),
+                2 => (-1e3..1e3f64).prop_map(|x| serde_json::to_string(&x).unwrap()),
+                1 => any::<i64>().prop_map(|x| x.to_string()),
+                1 => "-?(0|[1-9][0-9]{0,21})(\\.[0-9]{1,21})?([eE][+-]?[0-9]{1,4})?",
+                2 => prop_oneof![
+                    Just("null".to_string()),
+                    Just("true".to_string()),
+                    Just("false".to_string()),
+                    Just(r#""none""#.to_string()),
+                    Just(r#""tps_stuck""#.to_string()),
+                    Just(r#""t\u0070s""#.to_string()),
+                    Just("\"\u{e9}\"".to_string()),
+                    Just("[true]".to_string()),
+                    Just(r#"{"fault": "x"}"#.to_string()),
+                    Just("1e400".to_string()),
+                ],
+            ]
+        }
+
+        const KEYS: [&str; 8] = [
+            "fault",
+            "fault_active",
+            "fault_observable",
+            "angle_deg",
+            "p_m_pa",
+            "velocity",
+            "fault\\u005factive",
+            "",
+        ];
+
+        fn ws() -> impl Strategy<Value = &'static str> {
+            prop_oneof![8 => Just(""), 1 => Just(" "), 1 => Just("\n\t ")]
+        }
+
+        fn object_text() -> impl Strategy<Value = String> {
+            let member = (ws(), 0..KEYS.len(), ws(), value_text())
+                .prop_map(|(w1, k, w2, v)| format!("{w1}\"{}\":{w2}{v}", KEYS[k]));
+            // Usually the fault fields are there, so that the fast path has work.
+            let fault = prop_oneof![
+                Just(r#""fault":"none","fault_active":false"#.to_string()),
+                Just(
+                    r#""fault": "leak", "fault_active": true, "fault_observable": false"#
+                        .to_string()
+                ),
+                Just(String::new()),
+            ];
+            (prop::collection::vec(member, 0..4), fault, any::<bool>()).prop_map(
+                |(mut m, f, first)| {
+                    if !f.is_empty() {
+                        if first {
+                            m.insert(0, f);
+                        } else {
+                            m.push(f);
+                        }
+                    }
+                    format!("{{{}}}", m.join(","))
+                },
+            )
+        }
+
+        fn input() -> impl Strategy<Value = Vec<u8>> {
+            const BYTES: &[u8] = b"{}[],:\"\\ -.e09ntf\x00\x7f\xc3";
+            (
+                object_text(),
+                0..5u8,
+                any::<prop::sample::Index>(),
+                0..BYTES.len(),
+            )
+                .prop_map(|(text, how, at, byte)| {
+                    let mut b = text.into_bytes();
+                    let i = at.index(b.len() + 1);
+                    match how {
+                        1 if i < b.len() => {
+                            b.remove(i);
+                        }
+                        2 => b.insert(i, BYTES[byte]),
+                        3 if i < b.len() => b[i] = BYTES[byte],
+                        4 => b.truncate(i),
+                        _ => {}
+                    }
+                    b
+                })
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(4096))]
+
+            #[test]
+            fn parses_agree(data in input(), f in 0..KEYS.len()) {
+                let field = KEYS[f];
+                let general = parse_truth_general(&data, field);
+                prop_assert_eq!(outcome(&parse_truth(&data, field)), outcome(&general));
+                if let Some(fast) = parse_flat_truth(&data, field) {
+                    prop_assert_eq!(outcome(&Ok(fast)), outcome(&general));
+                }
+            }
+
+            /// Every truth message fdd writes takes the fast path.
+            #[test]
+            fn fdd_messages_take_the_fast_path(
+                x in any::<f64>(),
+                y in -100.0..100.0f64,
+                active in any::<bool>(),
+            ) {
+                let truth = ThrottleTruth {
+                    angle_deg: y,
+                    velocity: x,
+                    current_a: -x,
+                    fault: "tps_stuck".into(),
+                    fault_active: active,
+                };
+                let data = serde_json::to_vec(&truth).unwrap();
+                for field in ["angle_deg", "velocity", "current_a", "fault", "x"] {
+                    let fast = parse_flat_truth(&data, field);
+                    prop_assert!(fast.is_some());
+                    prop_assert_eq!(
+                        outcome(&Ok(fast.unwrap())),
+                        outcome(&parse_truth_general(&data, field))
+                    );
+                }
+            }
+        }
     }
 }

@@ -1,5 +1,5 @@
 //! CRC-32 (IEEE 802.3, the one MCAP uses), slicing-by-8, for the data and summary section
-//! checks. Chunk CRCs are checked by the mcap crate.
+//! checks. Chunk CRCs are checked with crc32fast (`reader.rs`), or by the mcap crate.
 
 const POLY: u32 = 0xEDB8_8320;
 

@@ -9,6 +9,8 @@ use std::fmt;
 
 use serde::de::{DeserializeSeed, Deserializer, IgnoredAny, MapAccess, SeqAccess, Visitor};
 
+use super::flat_json::{single_number_member, FlatObject, FlatValue};
+
 /// Why [`json_field_f64`] found no number.
 #[derive(Debug)]
 pub enum FieldLookupError {
@@ -35,7 +37,47 @@ impl std::error::Error for FieldLookupError {}
 
 /// The number at `path` (`name` or `outer.inner`) in the JSON object `json`; `null` gives NaN.
 /// The whole text is checked to be valid JSON.
+///
+/// A flat object (every signal message fdd writes) takes a fast path
+/// ([`flat_json`](super::flat_json)) with the same result, bit for bit; anything else, and a
+/// dotted path, goes through serde_json.
 pub fn json_field_f64(json: &[u8], path: &str) -> Result<f64, FieldLookupError> {
+    match flat_field_f64(json, path.as_bytes()) {
+        // The flat scan refuses keys with a `.`, so a dotted path always misses there: whether
+        // it is missing is for the general lookup to say.
+        Some(Err(FieldLookupError::Missing)) if path.contains('.') => general_field_f64(json, path),
+        Some(found) => found,
+        None => general_field_f64(json, path),
+    }
+}
+
+/// The fast path of [`json_field_f64`] for the top-level field `key`: `None` when `json` is not
+/// a flat object or the number is one
+/// [`number_f64`](super::flat_json::number_f64) leaves to serde_json. As serde_json: the first
+/// of duplicate keys wins (the others are only checked to be valid).
+#[inline]
+fn flat_field_f64(json: &[u8], key: &[u8]) -> Option<Result<f64, FieldLookupError>> {
+    if let Some(x) = single_number_member(json, key) {
+        return Some(Ok(x));
+    }
+    let mut obj = FlatObject::new(json).ok()?;
+    let mut found = None;
+    while let Some((k, v)) = obj.next_member().ok()? {
+        if found.is_none() && k == key {
+            found = Some(v);
+        }
+    }
+    Some(match found {
+        None => Err(FieldLookupError::Missing),
+        Some(FlatValue::Number(n)) => Ok(n.to_f64()?),
+        Some(FlatValue::Null) => Ok(f64::NAN),
+        Some(FlatValue::Bool(_)) => Err(FieldLookupError::NotANumber("a boolean")),
+        Some(FlatValue::Str(_)) => Err(FieldLookupError::NotANumber("a string")),
+    })
+}
+
+/// [`json_field_f64`] by serde_json, for any JSON.
+fn general_field_f64(json: &[u8], path: &str) -> Result<f64, FieldLookupError> {
     let mut de = serde_json::Deserializer::from_slice(json);
     let found = Lookup { path }
         .deserialize(&mut de)
@@ -238,6 +280,34 @@ mod tests {
     }
 
     #[test]
+    fn the_fast_path_takes_flat_objects_only() {
+        let fast = |j: &str, k: &str| flat_field_f64(j.as_bytes(), k.as_bytes());
+        assert_eq!(
+            fast(r#"{"voltage_v":1.25}"#, "voltage_v").unwrap().unwrap(),
+            1.25
+        );
+        assert!(fast(r#"{"voltage_v":null}"#, "voltage_v")
+            .unwrap()
+            .unwrap()
+            .is_nan());
+        assert!(matches!(
+            fast(r#"{"a":1,"a":true}"#, "a"),
+            Some(Ok(x)) if x == 1.0
+        ));
+        assert!(matches!(
+            fast(r#"{"a":"x"}"#, "a"),
+            Some(Err(FieldLookupError::NotANumber("a string")))
+        ));
+        assert!(matches!(
+            fast(r#"{"a":1}"#, "b"),
+            Some(Err(FieldLookupError::Missing))
+        ));
+        assert!(fast(r#"{"a":{"b":1}}"#, "a").is_none());
+        assert!(fast(r#"{"a":1e400}"#, "a").is_none());
+        assert!(fast(r#"{"a":1, "b": }"#, "a").is_none());
+    }
+
+    #[test]
     fn invalid_json_is_an_error_even_after_the_field() {
         assert!(matches!(
             get(r#"{"a": 1, "b": }"#, "a"),
@@ -252,5 +322,172 @@ mod tests {
             get(r#"{"a": NaN}"#, "a"),
             Err(FieldLookupError::Json(_))
         ));
+    }
+
+    /// The fast path against serde_json, on generated and mutated inputs.
+    mod fast_path_is_serde_json {
+        use super::super::*;
+        use crate::log::flat_json::number_f64;
+        use crate::log::messages::{MotorVoltage, ThrottleTruth};
+        use proptest::prelude::*;
+
+        /// A comparable form of a lookup's outcome (numbers by their bits).
+        fn outcome(r: &Result<f64, FieldLookupError>) -> String {
+            match r {
+                Ok(x) => format!("ok {:016x}", x.to_bits()),
+                Err(FieldLookupError::Json(e)) => format!("json {e}"),
+                Err(FieldLookupError::Missing) => "missing".into(),
+                Err(FieldLookupError::NotANumber(w)) => format!("nan {w}"),
+            }
+        }
+
+        fn number_text() -> impl Strategy<Value = String> {
+            prop_oneof![
+                // As fdd writes them (ryu, shortest round trip), and other spellings.
+                any::<f64>().prop_map(|x| serde_json::to_string(&x).unwrap()),
+                any::<f64>().prop_map(|x| format!("{x:e}")),
+                any::<f64>().prop_map(|x| format!("{x:E}")),
+                any::<f64>().prop_map(|x| format!("{x}")),
+                (-1e3..1e3f64).prop_map(|x| serde_json::to_string(&x).unwrap()),
+                any::<u64>().prop_map(|x| x.to_string()),
+                any::<i64>().prop_map(|x| x.to_string()),
+                "-?(0|[1-9][0-9]{0,24})(\\.[0-9]{1,24})?([eE][+-]?[0-9]{1,11})?",
+            ]
+        }
+
+        fn value_text() -> impl Strategy<Value = String> {
+            prop_oneof![
+                6 => number_text(),
+                1 => prop_oneof![
+                    Just("null".to_string()),
+                    Just("true".to_string()),
+                    Just("false".to_string()),
+                    Just(r#""none""#.to_string()),
+                    Just(r#""a\"b""#.to_string()),
+                    Just("\"\u{e9}\"".to_string()),
+                    Just("[1, 2.5]".to_string()),
+                    Just(r#"{"voltage_v": 2}"#.to_string()),
+                    Just("NaN".to_string()),
+                    Just("1e400".to_string()),
+                ],
+            ]
+        }
+
+        const KEYS: [&str; 8] = [
+            "voltage_v",
+            "a",
+            "power_w",
+            "\\u0061",
+            "\u{e9}",
+            "",
+            "a.b",
+            "voltage_v ",
+        ];
+
+        fn ws() -> impl Strategy<Value = &'static str> {
+            prop_oneof![8 => Just(""), 1 => Just(" "), 1 => Just("\n\t\r ")]
+        }
+
+        fn object_text() -> impl Strategy<Value = String> {
+            let member = (ws(), 0..KEYS.len(), ws(), ws(), value_text(), ws())
+                .prop_map(|(w1, k, w2, w3, v, w4)| format!("{w1}\"{}\"{w2}:{w3}{v}{w4}", KEYS[k]));
+            (ws(), prop::collection::vec(member, 0..4), ws())
+                .prop_map(|(w0, m, w5)| format!("{w0}{{{}}}{w5}", m.join(",")))
+        }
+
+        /// An object, possibly with one byte deleted, inserted or replaced, or cut short.
+        fn input() -> impl Strategy<Value = Vec<u8>> {
+            const BYTES: &[u8] = b"{}[],:\"\\ -+.eE019nulltruefalse\x00\x1f\x7f\xc3\xff";
+            (
+                object_text(),
+                0..5u8,
+                any::<prop::sample::Index>(),
+                0..BYTES.len(),
+            )
+                .prop_map(|(text, how, at, byte)| {
+                    let mut b = text.into_bytes();
+                    let i = at.index(b.len() + 1);
+                    match how {
+                        1 if i < b.len() => {
+                            b.remove(i);
+                        }
+                        2 => b.insert(i, BYTES[byte]),
+                        3 if i < b.len() => b[i] = BYTES[byte],
+                        4 => b.truncate(i),
+                        _ => {}
+                    }
+                    b
+                })
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(4096))]
+
+            #[test]
+            fn lookups_agree(json in input(), k in 0..KEYS.len()) {
+                let path = KEYS[k];
+                let general = general_field_f64(&json, path);
+                prop_assert_eq!(outcome(&json_field_f64(&json, path)), outcome(&general));
+                // (json_field_f64 sends a dotted path to serde_json.)
+                if !path.contains('.') {
+                    if let Some(fast) = flat_field_f64(&json, path.as_bytes()) {
+                        prop_assert_eq!(outcome(&fast), outcome(&general));
+                    }
+                }
+            }
+
+            #[test]
+            fn numbers_agree(text in number_text()) {
+                let serde: Result<f64, _> = serde_json::from_str(&text);
+                match number_f64(text.as_bytes()) {
+                    Some(x) => prop_assert_eq!(x.to_bits(), serde.unwrap().to_bits(), "{}", text),
+                    // Left to serde_json: out of range, or a significand or exponent too
+                    // long for u64 / i32.
+                    None => {
+                        let (mantissa, exp) = text.split_once(['e', 'E']).unwrap_or((&text, ""));
+                        let digits = |s: &str| s.bytes().filter(u8::is_ascii_digit).count();
+                        prop_assert!(
+                            serde.is_err() || digits(mantissa) > 19 || digits(exp) > 9,
+                            "{} not handled", text
+                        );
+                    }
+                }
+            }
+
+            /// Every signal and truth message fdd writes takes the fast path.
+            #[test]
+            fn fdd_messages_take_the_fast_path(x in any::<f64>(), y in -1e3..1e3f64) {
+                for v in [x, y] {
+                    let json = serde_json::to_vec(&MotorVoltage { voltage_v: v }).unwrap();
+                    let fast = flat_field_f64(&json, b"voltage_v");
+                    prop_assert!(fast.is_some(), "{}", String::from_utf8_lossy(&json));
+                    // The quickest path, for every finite number.
+                    prop_assert_eq!(
+                        single_number_member(&json, b"voltage_v").is_some(),
+                        v.is_finite()
+                    );
+                    prop_assert_eq!(
+                        outcome(&fast.unwrap()),
+                        outcome(&general_field_f64(&json, "voltage_v"))
+                    );
+                }
+                let truth = ThrottleTruth {
+                    angle_deg: y,
+                    velocity: x,
+                    current_a: -y,
+                    fault: "tps_stuck".into(),
+                    fault_active: true,
+                };
+                let json = serde_json::to_vec(&truth).unwrap();
+                for key in ["angle_deg", "velocity", "current_a", "fault", "fault_active", "x"] {
+                    let fast = flat_field_f64(&json, key.as_bytes());
+                    prop_assert!(fast.is_some());
+                    prop_assert_eq!(
+                        outcome(&fast.unwrap()),
+                        outcome(&general_field_f64(&json, key))
+                    );
+                }
+            }
+        }
     }
 }

@@ -54,6 +54,7 @@
 mod crc32;
 pub mod error;
 pub mod field;
+pub mod flat_json;
 pub mod messages;
 pub mod reader;
 mod records;
