@@ -6,7 +6,7 @@
 use std::borrow::Cow;
 use std::fmt;
 
-use fdd_monitor::log::flat_json::{FlatObject, FlatValue};
+use fdd_monitor::log::flat_json::{FlatObject, FlatValue, PlainKey};
 use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, Visitor};
 use serde::Deserializer;
 
@@ -47,33 +47,93 @@ fn parse_flat_truth<'a>(data: &'a [u8], field: &str) -> Option<TruthMsg<'a>> {
     let (mut fault, mut active, mut observable, mut value) = (None, None, None, f64::NAN);
     let field = field.as_bytes();
     let mut obj = FlatObject::new(data).ok()?;
-    while let Some(key) = obj.next_key().ok()? {
-        let v = obj.value().ok()?;
-        // The fault keys first, as the general path; a wrong type is for it to name.
-        match (key.len(), v) {
-            (5, FlatValue::Str(s)) if key == b"fault" => fault = Some(s),
-            (12, FlatValue::Bool(b)) if key == b"fault_active" => active = Some(b),
-            (16, FlatValue::Bool(b)) if key == b"fault_observable" => observable = Some(b),
-            (5 | 12 | 16, _) if matches!(key, b"fault" | b"fault_active" | b"fault_observable") => {
-                return None
+    // The keys where fdd writes them are only compared; any other is read and looked up.
+    let layout = LAYOUTS
+        .iter()
+        .find(|l| obj.clone().next_key_is(l[0].0))
+        .map_or(&[][..], |l| &l[..]);
+    let mut expected = layout.iter();
+    loop {
+        let (key, role) = match expected.next() {
+            Some(&(k, role)) if obj.next_key_is(k) => (k.bytes(), role),
+            _ => {
+                // Off the layout: read every further key.
+                expected = [].iter();
+                match obj.next_key().ok()? {
+                    Some(b"fault") => (&b"fault"[..], Role::Fault),
+                    Some(b"fault_active") => (&b"fault_active"[..], Role::Active),
+                    Some(b"fault_observable") => (&b"fault_observable"[..], Role::Observable),
+                    Some(k) => (k, Role::Other),
+                    None => break,
+                }
             }
-            _ if key == field => {
-                value = match v {
+        };
+        // The fault keys first, as the general path; a wrong type is for it to name.
+        match role {
+            Role::Fault => match obj.value().ok()? {
+                FlatValue::Str(s) => fault = Some(s),
+                _ => return None,
+            },
+            Role::Active => match obj.value().ok()? {
+                FlatValue::Bool(b) => active = Some(b),
+                _ => return None,
+            },
+            Role::Observable => match obj.value().ok()? {
+                FlatValue::Bool(b) => observable = Some(b),
+                _ => return None,
+            },
+            Role::Other if key == field => {
+                value = match obj.value().ok()? {
                     FlatValue::Number(n) => n.to_f64()?,
                     _ => f64::NAN,
                 }
             }
-            _ => {}
+            Role::Other => obj.skip_value().ok()?,
         }
     }
     Some(TruthMsg {
-        // Printable ASCII, so always UTF-8.
-        fault: Cow::Borrowed(std::str::from_utf8(fault?).ok()?),
+        fault: match fault? {
+            b"none" => Cow::Borrowed("none"),
+            // Printable ASCII, so always UTF-8.
+            name => Cow::Borrowed(std::str::from_utf8(name).ok()?),
+        },
         fault_active: active?,
         fault_observable: observable,
         value,
     })
 }
+
+/// What a truth key is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Role {
+    Fault,
+    Active,
+    Observable,
+    Other,
+}
+
+/// The truth messages' keys in the order fdd writes them (`ThrottleTruth`, `IntakeTruth` of
+/// `fdd_monitor::log`), for the fast path: a key where it is expected is only compared.
+const LAYOUTS: [&[(PlainKey, Role)]; 2] = [
+    &[
+        (PlainKey::new(b"angle_deg"), Role::Other),
+        (PlainKey::new(b"velocity"), Role::Other),
+        (PlainKey::new(b"current_a"), Role::Other),
+        (PlainKey::new(b"fault"), Role::Fault),
+        (PlainKey::new(b"fault_active"), Role::Active),
+    ],
+    &[
+        (PlainKey::new(b"p_m_pa"), Role::Other),
+        (PlainKey::new(b"w_thr_kg_s"), Role::Other),
+        (PlainKey::new(b"w_egr_kg_s"), Role::Other),
+        (PlainKey::new(b"w_inv_kg_s"), Role::Other),
+        (PlainKey::new(b"w_leak_kg_s"), Role::Other),
+        (PlainKey::new(b"egr_actual"), Role::Other),
+        (PlainKey::new(b"fault"), Role::Fault),
+        (PlainKey::new(b"fault_active"), Role::Active),
+        (PlainKey::new(b"fault_observable"), Role::Observable),
+    ],
+];
 
 /// [`parse_truth`] by serde_json, for any JSON.
 fn parse_truth_general<'a>(data: &'a [u8], field: &str) -> Result<TruthMsg<'a>, serde_json::Error> {
@@ -241,6 +301,56 @@ mod tests {
         assert!(parse_truth(br#"{"fault": "x", "fault_active": true} x"#, "a").is_err());
     }
 
+    #[test]
+    fn the_layouts_are_the_keys_fdd_writes_in_order() {
+        let keys = |text: String| -> Vec<String> {
+            let mut obj = FlatObject::new(text.as_bytes()).unwrap();
+            let mut out = Vec::new();
+            while let Some((k, _)) = obj.next_member().unwrap() {
+                out.push(String::from_utf8(k.to_vec()).unwrap());
+            }
+            out
+        };
+        let throttle = fdd_monitor::log::ThrottleTruth {
+            angle_deg: 1.0,
+            velocity: 2.0,
+            current_a: 3.0,
+            fault: "none".into(),
+            fault_active: false,
+        };
+        let intake = fdd_monitor::log::messages::IntakeTruth {
+            p_m_pa: 1.0,
+            w_thr_kg_s: 2.0,
+            w_egr_kg_s: 3.0,
+            w_inv_kg_s: 4.0,
+            w_leak_kg_s: 5.0,
+            egr_actual: 6.0,
+            fault: "none".into(),
+            fault_active: false,
+            fault_observable: true,
+        };
+        let written = [
+            keys(serde_json::to_string(&throttle).unwrap()),
+            keys(serde_json::to_string(&intake).unwrap()),
+        ];
+        for (key, role) in LAYOUTS.iter().flat_map(|l| l.iter()) {
+            let expected = match key.bytes() {
+                b"fault" => Role::Fault,
+                b"fault_active" => Role::Active,
+                b"fault_observable" => Role::Observable,
+                _ => Role::Other,
+            };
+            assert_eq!(*role, expected);
+        }
+        for (layout, written) in LAYOUTS.iter().zip(written) {
+            let layout: Vec<String> = layout
+                .iter()
+                .map(|(k, _)| String::from_utf8(k.bytes().to_vec()).unwrap())
+                .collect();
+            assert_eq!(layout, written);
+        }
+    }
+
     /// The fast path against serde_json, on generated and mutated inputs.
     mod fast_path_is_serde_json {
         use super::super::*;
@@ -283,7 +393,7 @@ mod tests {
             ]
         }
 
-        const KEYS: [&str; 8] = [
+        const KEYS: [&str; 10] = [
             "fault",
             "fault_active",
             "fault_observable",
@@ -292,6 +402,8 @@ mod tests {
             "velocity",
             "fault\\u005factive",
             "",
+            "w_egr_kg_s",
+            "egr_actual",
         ];
 
         fn ws() -> impl Strategy<Value = &'static str> {
@@ -324,10 +436,45 @@ mod tests {
             )
         }
 
+        /// Truth messages as fdd writes them (the fast path's layouts).
+        fn fdd_truth_text() -> impl Strategy<Value = String> {
+            let number = || prop_oneof![any::<f64>(), -100.0..100.0f64, Just(0.0)];
+            (
+                prop::array::uniform6(number()),
+                prop_oneof![Just("none"), Just("tps_stuck"), Just("leak")],
+                any::<[bool; 2]>(),
+                any::<bool>(),
+            )
+                .prop_map(|(x, fault, [active, observable], throttle)| {
+                    if throttle {
+                        serde_json::to_string(&ThrottleTruth {
+                            angle_deg: x[0],
+                            velocity: x[1],
+                            current_a: x[2],
+                            fault: fault.into(),
+                            fault_active: active,
+                        })
+                    } else {
+                        serde_json::to_string(&fdd_monitor::log::messages::IntakeTruth {
+                            p_m_pa: x[0],
+                            w_thr_kg_s: x[1],
+                            w_egr_kg_s: x[2],
+                            w_inv_kg_s: x[3],
+                            w_leak_kg_s: x[4],
+                            egr_actual: x[5],
+                            fault: fault.into(),
+                            fault_active: active,
+                            fault_observable: observable,
+                        })
+                    }
+                    .unwrap()
+                })
+        }
+
         fn input() -> impl Strategy<Value = Vec<u8>> {
             const BYTES: &[u8] = b"{}[],:\"\\ -.e09ntf\x00\x7f\xc3";
             (
-                object_text(),
+                prop_oneof![object_text(), fdd_truth_text()],
                 0..5u8,
                 any::<prop::sample::Index>(),
                 0..BYTES.len(),

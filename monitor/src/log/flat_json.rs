@@ -40,6 +40,66 @@ pub enum FlatValue<'a> {
     Str(&'a [u8]),
 }
 
+/// A key known to be plain (printable ASCII without `"`, `\` or `.`), for
+/// [`FlatObject::next_key_is`]; checked when the constant is built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PlainKey {
+    key: &'static [u8],
+    /// `key":` as two little-endian words (zero past its end) and the masks of its bytes, when
+    /// it has at most 16 bytes: then compared with two word loads.
+    pattern: [u64; 2],
+    mask: [u64; 2],
+}
+
+impl PlainKey {
+    /// `key`, which must be plain (a panic otherwise: at compile time in a constant).
+    pub const fn new(key: &'static [u8]) -> Self {
+        let mut pattern = [0u64; 2];
+        let mut mask = [0u64; 2];
+        let n = key.len() + 2;
+        let mut i = 0;
+        while i < n {
+            let c = if i < key.len() {
+                key[i]
+            } else if i == key.len() {
+                b'"'
+            } else {
+                b':'
+            };
+            if i < key.len() {
+                assert!(
+                    c >= 0x20 && c < 0x80 && c != b'"' && c != b'\\' && c != b'.',
+                    "not a plain key"
+                );
+            }
+            if i < 16 {
+                pattern[i / 8] |= (c as u64) << (8 * (i % 8));
+                mask[i / 8] |= 0xFF << (8 * (i % 8));
+            }
+            i += 1;
+        }
+        PlainKey { key, pattern, mask }
+    }
+
+    /// The key.
+    pub const fn bytes(self) -> &'static [u8] {
+        self.key
+    }
+
+    /// Whether `b[i..]` starts with `key":`.
+    #[inline(always)]
+    fn starts(&self, b: &[u8], i: usize) -> bool {
+        if self.key.len() + 2 > 16 {
+            let k = self.key.len();
+            return b.get(i..i + k) == Some(self.key) && b.get(i + k..i + k + 2) == Some(b"\":");
+        }
+        // Bytes past the end of `b` read as zeros, which no pattern byte is.
+        ((word_at(b, i) ^ self.pattern[0]) & self.mask[0])
+            | ((word_at(b, i + 8) ^ self.pattern[1]) & self.mask[1])
+            == 0
+    }
+}
+
 /// A number of a [`FlatObject`]: its text and its parts, read in the same pass.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FlatNumber<'a> {
@@ -145,6 +205,46 @@ impl<'a> FlatObject<'a> {
         };
         self.i = skip_ws(b, end);
         Ok(value)
+    }
+
+    /// Whether the next key is `key` written `"key":` (as serde_json writes it), and then
+    /// positioned at its value as after [`next_key`](Self::next_key); `false` (nothing read)
+    /// for any other key or spelling, the end of the object or anything else (then use
+    /// `next_key`). Quicker than `next_key` for a key the caller expects: a known plain key is
+    /// only compared.
+    #[inline(always)]
+    pub fn next_key_is(&mut self, key: PlainKey) -> bool {
+        let b = self.b;
+        let mut i = self.i;
+        match b.get(i) {
+            Some(b'"') if self.first => {}
+            Some(b',') if !self.first => i = skip_ws(b, i + 1),
+            _ => return false,
+        }
+        // Compact `"key":` only (with whitespace around the colon: `next_key`).
+        if b.get(i) != Some(&b'"') || !key.starts(b, i + 1) {
+            return false;
+        }
+        self.first = false;
+        self.i = skip_ws(b, i + 3 + key.key.len());
+        true
+    }
+
+    /// Checks the value after a key and moves past it, without converting a number.
+    #[inline(always)]
+    pub fn skip_value(&mut self) -> Result<(), NotFlat> {
+        let b = self.b;
+        let i = self.i;
+        let end = match b.get(i) {
+            Some(b'-' | b'0'..=b'9') => number_end(b, i).ok_or(NotFlat)?,
+            Some(b'"') => plain_string_end::<false>(b, i + 1).ok_or(NotFlat)? + 1,
+            Some(b'n') if b.get(i..i + 4) == Some(b"null") => i + 4,
+            Some(b't') if b.get(i..i + 4) == Some(b"true") => i + 4,
+            Some(b'f') if b.get(i..i + 5) == Some(b"false") => i + 5,
+            _ => return Err(NotFlat),
+        };
+        self.i = skip_ws(b, end);
+        Ok(())
     }
 
     /// [`next_key`](Self::next_key) and [`value`](Self::value) together.
@@ -360,21 +460,10 @@ const POW10_U64: [u64; 20] = [
 #[inline(always)]
 fn digit_run(b: &[u8], mut i: usize) -> (usize, u64) {
     let mut v: u64 = 0;
-    let tail = |v: u64, i: usize, x: u64| {
-        let k = first_flagged(non_digits(x));
-        if k == 0 {
-            return (i, v);
-        }
-        (
-            i + k,
-            v.wrapping_mul(POW10_U64[k])
-                .wrapping_add(digits8_value(x, k)),
-        )
-    };
     while let Some(w) = b.get(i..i + 8) {
         let x = u64::from_le_bytes(w.try_into().unwrap_or([0; 8]));
         if non_digits(x) != 0 {
-            return tail(v, i, x);
+            return digit_run_tail(v, i, x);
         }
         v = v
             .wrapping_mul(100_000_000)
@@ -382,7 +471,55 @@ fn digit_run(b: &[u8], mut i: usize) -> (usize, u64) {
         i += 8;
     }
     // The last bytes, padded with zeros (which are not digits).
-    tail(v, i, word_at(b, i))
+    digit_run_tail(v, i, word_at(b, i))
+}
+
+/// The end of [`digit_run`]: the digits at the low end of `x` (the word at `i`), appended to
+/// `v`.
+#[inline(always)]
+fn digit_run_tail(v: u64, i: usize, x: u64) -> (usize, u64) {
+    let k = first_flagged(non_digits(x));
+    if k == 0 {
+        return (i, v);
+    }
+    (
+        i + k,
+        v.wrapping_mul(POW10_U64[k])
+            .wrapping_add(digits8_value(x, k)),
+    )
+}
+
+/// The index just after a JSON number starting at `i` (a `-` or a digit), when its syntax is
+/// valid up to there (as [`scan_number`], without the value).
+#[inline(always)]
+fn number_end(b: &[u8], mut i: usize) -> Option<usize> {
+    if b.get(i) == Some(&b'-') {
+        i += 1;
+    }
+    match b.get(i)? {
+        b'0' => i += 1,
+        b'1'..=b'9' => i = digits_end(b, i + 1),
+        _ => return None,
+    }
+    if b.get(i) == Some(&b'.') {
+        let end = digits_end(b, i + 1);
+        if end == i + 1 {
+            return None;
+        }
+        i = end;
+    }
+    if let Some(b'e' | b'E') = b.get(i) {
+        i += 1;
+        if let Some(b'+' | b'-') = b.get(i) {
+            i += 1;
+        }
+        let end = digits_end(b, i);
+        if end == i {
+            return None;
+        }
+        i = end;
+    }
+    Some(i)
 }
 
 /// The JSON number starting at `start` (a `-` or a digit), when its syntax is valid up to
@@ -719,6 +856,56 @@ mod tests {
         ] {
             assert_eq!(members(refused), None, "{refused:?}");
         }
+    }
+
+    #[test]
+    fn expected_keys_are_compared_and_values_skipped() {
+        const A: PlainKey = PlainKey::new(b"a");
+        const BB: PlainKey = PlainKey::new(b"bb");
+        let mut obj = FlatObject::new(br#"{"a":1.5e3, "bb":"x","c":null}"#).unwrap();
+        assert!(!obj.next_key_is(BB));
+        assert!(obj.next_key_is(A));
+        obj.skip_value().unwrap();
+        assert!(!obj.next_key_is(A));
+        assert!(obj.next_key_is(BB));
+        obj.skip_value().unwrap();
+        assert_eq!(obj.next_key(), Ok(Some(&b"c"[..])));
+        obj.skip_value().unwrap();
+        assert!(!obj.next_key_is(A));
+        assert_eq!(obj.next_key(), Ok(None));
+        // A prefix of a longer key is not the key; whitespace before the colon is for next_key.
+        let mut obj = FlatObject::new(br#"{"ab":1}"#).unwrap();
+        assert!(!obj.next_key_is(A));
+        let mut obj = FlatObject::new(br#"{"a" :1}"#).unwrap();
+        assert!(!obj.next_key_is(A));
+        assert_eq!(obj.next_key(), Ok(Some(&b"a"[..])));
+        // Long keys too.
+        const LONG: PlainKey = PlainKey::new(b"a_key_of_twenty_bytes");
+        let mut obj =
+            FlatObject::new(br#"{"a_key_of_twenty_bytes":1,"a_key_of_twenty_byteZ":2}"#).unwrap();
+        assert!(obj.next_key_is(LONG));
+        obj.skip_value().unwrap();
+        assert!(!obj.next_key_is(LONG));
+        for bad in [
+            &br#"{"a":01}"#[..],
+            br#"{"a":1.}"#,
+            br#"{"a":"
+"}"#,
+            br#"{"a":nul}"#,
+        ] {
+            let mut obj = FlatObject::new(bad).unwrap();
+            assert!(obj.next_key_is(A));
+            assert!(
+                obj.skip_value().is_err() || obj.next_key().is_err(),
+                "{bad:?}"
+            );
+        }
+    }
+
+    #[test]
+    #[should_panic(expected = "not a plain key")]
+    fn a_dotted_key_is_not_plain() {
+        let _ = PlainKey::new(b"a.b");
     }
 
     #[test]
