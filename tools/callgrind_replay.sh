@@ -44,14 +44,14 @@ components=(
     "JSON field parsing (signals)|fdd_monitor::log::reader::LogMessage::field_f64"
     "truth parsing|fdd::replay::truth::parse_truth"
     "throttle monitor|<fdd_monitor::throttle::ThrottleMonitor as fdd_monitor::monitor::Monitor>::step"
-    "staleness monitor|<fdd::replay::staleness::StalenessMonitor as fdd_monitor::monitor::Monitor>::step"
+    "staleness monitor|<fdd_monitor::staleness::StalenessMonitor as fdd_monitor::monitor::Monitor>::step"
 )
 # Parts of the throttle monitor: label and the callee whose calls from its step are counted.
 throttle_parts=(
     "UKF predict (2 filters)|fdd_estimators::ukf::Ukf<T,O,_,_,_,_>::predict"
     "UKF update (2 filters)|fdd_estimators::ukf::Ukf<T,O,_,_,_,_>::update_subset"
-    "event reporting|fdd_monitor::monitor_events::MonitorEvents::report"
-    "outputs to the sinks|fdd::replay::Replayer::start_cycle::{{closure}}"
+    "event reporting|fdd_monitor::monitor_events::MonitorEvents::report_one"
+    "outputs to the sinks|fdd_monitor::scheduler::Scheduler::run_until::{{closure}}"
 )
 
 profile() { # tag log

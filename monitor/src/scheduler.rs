@@ -31,6 +31,8 @@ pub type StepSink<'s> = dyn FnMut(usize, u64, Output<'_>) + 's;
 pub struct Scheduler {
     entries: Vec<Entry>,
     start_ns: u64,
+    /// Whether innovations and test statistics are passed on (see [`Scheduler::set_detail`]).
+    detail: bool,
 }
 
 impl Scheduler {
@@ -39,6 +41,7 @@ impl Scheduler {
         Self {
             entries: Vec::new(),
             start_ns,
+            detail: true,
         }
     }
 
@@ -104,6 +107,13 @@ impl Scheduler {
         e.enabled = on;
     }
 
+    /// Whether the steps' innovations and test statistics reach the sink (default true). A
+    /// host that only wants events, status bytes and estimates turns them off, and the
+    /// outputs of a step stop at the monitor's own callback.
+    pub fn set_detail(&mut self, on: bool) {
+        self.detail = on;
+    }
+
     /// Every monitor's next step falls at `start_ns` again (a new operation cycle).
     pub fn restart(&mut self, start_ns: u64) {
         self.start_ns = start_ns;
@@ -128,7 +138,15 @@ impl Scheduler {
                 return ran;
             };
             let e = &mut self.entries[i];
-            e.monitor.step(due, signals, &mut |o| out(i, due, o));
+            if self.detail {
+                e.monitor.step(due, signals, &mut |o| out(i, due, o));
+            } else {
+                e.monitor.step(due, signals, &mut |o| {
+                    if !matches!(o, Output::Innovation { .. } | Output::Test { .. }) {
+                        out(i, due, o)
+                    }
+                });
+            }
             e.next_due_ns = due.saturating_add(e.period_ns);
             e.steps += 1;
             ran += 1;

@@ -434,7 +434,10 @@ pub fn replay(
         );
     }
     let run_refs: Vec<&str> = run.iter().map(String::as_str).collect();
-    let mut builder = Runtime::builder(cfg.clone()).only_monitors(&run_refs);
+    // Innovations and test statistics only go to `--out`.
+    let mut builder = Runtime::builder(cfg.clone())
+        .only_monitors(&run_refs)
+        .detail_outputs(opts.out.is_some());
     if let Some(base) = &opts.memory {
         builder = builder.persistence(base);
     }

@@ -163,6 +163,7 @@ pub struct RuntimeBuilder {
     queues: Vec<QueueSpec>,
     ingestion_period_ns: u64,
     persistence: Option<std::path::PathBuf>,
+    detail: bool,
 }
 
 impl RuntimeBuilder {
@@ -190,6 +191,13 @@ impl RuntimeBuilder {
             capacity,
             dtc: dtc.to_string(),
         });
+        self
+    }
+
+    /// Whether the sink receives every step's innovations and test statistics (default true);
+    /// without them it still gets events, status bytes and estimates, for less work per step.
+    pub fn detail_outputs(mut self, on: bool) -> Self {
+        self.detail = on;
         self
     }
 
@@ -256,6 +264,7 @@ impl Runtime {
             queues: Vec::new(),
             ingestion_period_ns: 10_000_000,
             persistence: None,
+            detail: true,
         }
     }
 
@@ -330,6 +339,7 @@ impl Runtime {
         configure_freeze_frames(cfg, &table, &mut monitors)?;
 
         let mut sched = Scheduler::new(0);
+        sched.set_detail(b.detail);
         let mut names = Vec::new();
         for m in monitors {
             names.push(m.name().to_string());
