@@ -25,8 +25,9 @@ fn invalid(origin: &str, message: impl Into<String>) -> ConfigError {
     }
 }
 
-/// The text of the file at `path`, or the embedded default, with the origin to name in errors.
-fn read_or_embedded(
+/// The text of the file at `path`, or the embedded default, with the origin to name in errors
+/// (`embedded <name>` or the path). Every configuration file of fdd is read through here.
+pub(crate) fn read_or_embedded(
     path: Option<&Path>,
     embedded: &'static str,
     name: &str,

@@ -72,3 +72,20 @@ pub fn counted<R>(f: impl FnOnce() -> R) -> (R, usize) {
     ARMED.with(|a| a.set(false));
     (r, COUNT.with(Cell::get))
 }
+
+/// One edit of a byte string, for tests that mutate valid inputs into almost-valid ones:
+/// `how` 1 deletes the byte at `at`, 2 inserts `byte` before it, 3 replaces it with `byte`,
+/// 4 cuts the input at `at`; anything else (and an `at` past the end for 1 and 3) leaves it.
+pub fn mutate(mut bytes: Vec<u8>, how: u8, at: usize, byte: u8) -> Vec<u8> {
+    let at = at.min(bytes.len());
+    match how {
+        1 if at < bytes.len() => {
+            bytes.remove(at);
+        }
+        2 => bytes.insert(at, byte),
+        3 if at < bytes.len() => bytes[at] = byte,
+        4 => bytes.truncate(at),
+        _ => {}
+    }
+    bytes
+}

@@ -405,18 +405,9 @@ mod tests {
                 0..BYTES.len(),
             )
                 .prop_map(|(text, how, at, byte)| {
-                    let mut b = text.into_bytes();
+                    let b = text.into_bytes();
                     let i = at.index(b.len() + 1);
-                    match how {
-                        1 if i < b.len() => {
-                            b.remove(i);
-                        }
-                        2 => b.insert(i, BYTES[byte]),
-                        3 if i < b.len() => b[i] = BYTES[byte],
-                        4 => b.truncate(i),
-                        _ => {}
-                    }
-                    b
+                    fdd_testkit::mutate(b, how, i, BYTES[byte])
                 })
         }
 

@@ -249,17 +249,9 @@ impl RuntimeConfig {
 
     /// The embedded default, or the file at `path`.
     pub fn load(path: Option<&Path>) -> Result<Self, ConfigError> {
-        let cfg = match path {
-            None => Self::parse(DEFAULT_RUNTIME_TOML, EMBEDDED_ORIGIN)?,
-            Some(p) => {
-                let origin = p.display().to_string();
-                let text = std::fs::read_to_string(p).map_err(|source| ConfigError::Read {
-                    origin: origin.clone(),
-                    source,
-                })?;
-                Self::parse(&text, &origin)?
-            }
-        };
+        let (text, origin) =
+            crate::config::read_or_embedded(path, DEFAULT_RUNTIME_TOML, "config/fdd.toml")?;
+        let cfg = Self::parse(&text, &origin)?;
         tracing::info!(
             config = %cfg.origin,
             signals = cfg.signals.len(),
