@@ -96,13 +96,13 @@ impl Scheduler {
     /// after the latest step of any monitor (it does not catch up on the steps it missed).
     pub fn set_enabled(&mut self, i: usize, on: bool, now_ns: u64) {
         let e = &mut self.entries[i];
-        if on && !e.enabled {
-            while e.next_due_ns <= now_ns {
-                e.next_due_ns = e.next_due_ns.saturating_add(e.period_ns);
-                if e.next_due_ns == u64::MAX {
-                    break;
-                }
-            }
+        if on && !e.enabled && e.next_due_ns <= now_ns {
+            // The first due time after `now_ns` on the monitor's grid, in one step (a monitor
+            // disabled for hours would otherwise take millions of additions).
+            let missed = (now_ns - e.next_due_ns) / e.period_ns + 1;
+            e.next_due_ns = e
+                .next_due_ns
+                .saturating_add(missed.saturating_mul(e.period_ns));
         }
         e.enabled = on;
     }
@@ -260,6 +260,33 @@ mod tests {
         assert_eq!(*seen, expected);
         let counts: Vec<_> = s.step_counts().collect();
         assert_eq!(counts, vec![("fast", 4), ("slow", 2)]);
+    }
+
+    #[test]
+    fn a_monitor_enabled_again_resumes_on_its_grid_without_catching_up() {
+        let table = SignalTable::new(vec![SignalSpec {
+            name: "x".into(),
+            max_age_ns: 100,
+        }])
+        .expect("valid");
+        let seen = Rc::new(RefCell::new(Vec::new()));
+        let mut s = Scheduler::new(0);
+        s.add(Box::new(Probe {
+            name: "m",
+            period: 10,
+            input: table.id("x").expect("declared"),
+            seen: seen.clone(),
+            events: MonitorEvents::new(&[]).expect("empty"),
+        }))
+        .expect("valid period");
+        let mut sink = |_: usize, _: u64, _: Output<'_>| {};
+        s.run_until(15, &table, &mut sink);
+        s.set_enabled(0, false, 15);
+        s.run_until(1_000_000_000, &table, &mut sink);
+        s.set_enabled(0, true, 1_000_000_005);
+        s.run_until(1_000_000_031, &table, &mut sink);
+        let times: Vec<u64> = seen.borrow().iter().map(|x| x.1).collect();
+        assert_eq!(times, [0, 10, 1_000_000_010, 1_000_000_020, 1_000_000_030]);
     }
 
     #[test]
