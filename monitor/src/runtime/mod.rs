@@ -96,9 +96,11 @@ pub enum RuntimeError {
     #[error("signal id {0} is not a signal of this runtime")]
     UnknownSignal(usize),
     /// The signal table refused a sample.
-    #[error("signal `{signal}` at {t_ns} ns: sample refused: {source}")]
+    #[error("{signal} at {t_ns} ns: sample refused: {source}")]
     Sample {
-        signal: String,
+        /// The signal (its name: [`Runtime::signals`]`.spec(id)`); an id, so that refusing a
+        /// sample on the host path allocates nothing.
+        signal: SignalId,
         t_ns: u64,
         #[source]
         source: SampleError,
@@ -422,7 +424,7 @@ impl Runtime {
         self.table
             .set(signal, t_ns, value)
             .map_err(|source| RuntimeError::Sample {
-                signal: self.table.spec(signal).name.clone(),
+                signal,
                 t_ns,
                 source,
             })
