@@ -525,7 +525,6 @@ fn nis_only(nis: f64) -> Innovation<2> {
         residual: V2::zeros(),
         covariance: M2::identity(),
         nis,
-        log_likelihood: 0.0,
         dof: 2,
     }
 }

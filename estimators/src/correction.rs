@@ -7,9 +7,7 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::error::FilterError;
 use crate::innovation::Innovation;
-use crate::linalg::{
-    all_finite, cholesky, cholesky_log_det, cholesky_solve, first_non_finite, symmetrize,
-};
+use crate::linalg::{all_finite, cholesky, cholesky_solve, first_non_finite, symmetrize};
 
 /// Checks that `used` selects at least one component and that every selected measurement is finite.
 pub(crate) fn check_measurement<const M: usize>(
@@ -104,8 +102,6 @@ pub(crate) fn correct<const N: usize, const M: usize>(
     })?;
     let white = cholesky_solve(&l, &residual);
     let nis = residual.dot(&white);
-    let log_likelihood =
-        -0.5 * (dof as f64 * (2.0 * std::f64::consts::PI).ln() + cholesky_log_det(&l) + nis);
     Ok(Corrected {
         x,
         p,
@@ -114,7 +110,6 @@ pub(crate) fn correct<const N: usize, const M: usize>(
             residual,
             covariance: pyy,
             nis,
-            log_likelihood,
             dof,
         },
     })

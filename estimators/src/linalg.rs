@@ -147,8 +147,16 @@ pub fn sym_sqrt_and_inv_sqrt<const N: usize>(
 }
 
 /// True when every entry is finite.
+#[inline]
 pub fn all_finite<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> bool {
-    m.iter().all(|v| v.is_finite())
+    // `v * 0` is 0 for a finite entry and NaN for an infinite or NaN one, so the sum is 0
+    // exactly when all are finite; no early exit, so this runs branch-free on the filters'
+    // per-step path.
+    let mut zero = 0.0;
+    for v in m.iter() {
+        zero += v * 0.0;
+    }
+    zero == 0.0
 }
 
 /// Index and value of the first non-finite entry of a vector, if any.

@@ -42,6 +42,17 @@ pub trait ObservationModel<const N: usize, const M: usize, const U: usize> {
     fn observation_jacobian(&self, x: &SVector<f64, N>, u: &SVector<f64, U>) -> SMatrix<f64, M, N> {
         numerical_jacobian(|z| self.observe(z, u), x)
     }
+
+    /// `(H, d)` when `h(x, u) = H x + d` for every state (a linear sensor). The UKF then forms
+    /// the predicted measurement and its covariances in closed form (`H x + d`, `H P H' + R`,
+    /// `P H'`), which is what its sigma points give for a linear `h`, without drawing them.
+    /// `None` (the default) keeps the unscented transform.
+    fn affine_observation(
+        &self,
+        _u: &SVector<f64, U>,
+    ) -> Option<(SMatrix<f64, M, N>, SVector<f64, M>)> {
+        None
+    }
 }
 
 /// Central-difference Jacobian of `g` at `x`. The step for component j is

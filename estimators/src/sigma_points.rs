@@ -51,6 +51,10 @@ pub struct SigmaPoints<const N: usize, const L: usize> {
     mean_weights: SVector<f64, L>,
     cov_weights: SVector<f64, L>,
     kind: SigmaKind,
+    /// `c` when the offsets are `[0, c I, -c I]` (AHSM and scaled sets): the points are then
+    /// `x` and `x +- c col_i(S)`, placed without the dense product `S D` (same values, bit for
+    /// bit, at a fifth of the cost).
+    symmetric_scale: Option<f64>,
 }
 
 fn check_count(
@@ -90,6 +94,7 @@ impl<const N: usize, const L: usize> SigmaPoints<N, L> {
             mean_weights: w,
             cov_weights: w,
             kind: SigmaKind::Ahsm { lambda },
+            symmetric_scale: Some((n + lambda).sqrt()),
         })
     }
 
@@ -129,6 +134,7 @@ impl<const N: usize, const L: usize> SigmaPoints<N, L> {
             mean_weights: wm,
             cov_weights: wc,
             kind: SigmaKind::Scaled { alpha, beta, kappa },
+            symmetric_scale: Some((n + lambda).sqrt()),
         })
     }
 
@@ -168,6 +174,7 @@ impl<const N: usize, const L: usize> SigmaPoints<N, L> {
             mean_weights: w,
             cov_weights: w,
             kind: SigmaKind::Arm { w0 },
+            symmetric_scale: None,
         })
     }
 
@@ -207,11 +214,27 @@ impl<const N: usize, const L: usize> SigmaPoints<N, L> {
             mean_weights: w,
             cov_weights: w,
             kind: SigmaKind::Agm,
+            symmetric_scale: None,
         })
     }
 
     /// Places the points for mean `x` and covariance square root `s` (`s s' = P`).
+    #[inline]
     pub fn generate(&self, x: &SVector<f64, N>, s: &SMatrix<f64, N, N>) -> SMatrix<f64, N, L> {
+        if let Some(c) = self.symmetric_scale {
+            let mut pts = SMatrix::<f64, N, L>::zeros();
+            for r in 0..N {
+                pts[(r, 0)] = x[r];
+            }
+            for i in 0..N {
+                for r in 0..N {
+                    let d = s[(r, i)] * c;
+                    pts[(r, 1 + i)] = x[r] + d;
+                    pts[(r, 1 + N + i)] = x[r] - d;
+                }
+            }
+            return pts;
+        }
         let mut pts = s * self.offsets;
         for mut col in pts.column_iter_mut() {
             col += x;

@@ -125,12 +125,12 @@ where
             self.transition.constrain(&mut xj);
             pts.set_column(j, &xj);
         }
-        let x = pts * self.points.mean_weights();
+        let x = weighted_mean(&pts, self.points.mean_weights());
         let mut p = self.q;
         let wc = self.points.cov_weights();
         for j in 0..L {
             let d = pts.column(j) - x;
-            p += wc[j] * d * d.transpose();
+            add_weighted_outer(&mut p, wc[j], &d, &d);
         }
         symmetrize(&mut p);
         if !all_finite(&x) || !all_finite(&p) {
@@ -163,6 +163,18 @@ where
     ) -> Result<Innovation<M>, FilterError> {
         check_input(u)?;
         check_measurement(y, used)?;
+        if let Some((h, d)) = self.observation.affine_observation(u) {
+            // A linear sensor: the sigma points would give these moments exactly.
+            let y_pred = h * self.x + d;
+            let pxy = self.p * h.transpose();
+            let pyy = h * pxy + self.r;
+            let mut c = correct(&self.x, &self.p, y, &y_pred, pyy, pxy, used)?;
+            self.transition.constrain(&mut c.x);
+            self.x = c.x;
+            self.p = c.p;
+            self.p_chol = Some(c.p_chol);
+            return Ok(c.innovation);
+        }
         let s = cholesky(&self.p).map_err(|pivot| FilterError::NotPositiveDefinite {
             which: "state covariance",
             pivot,
@@ -172,15 +184,15 @@ where
         for j in 0..L {
             ys.set_column(j, &self.observation.observe(&xs.column(j).into_owned(), u));
         }
-        let y_pred = ys * self.points.mean_weights();
+        let y_pred = weighted_mean(&ys, self.points.mean_weights());
         let wc = self.points.cov_weights();
         let mut pyy = self.r;
         let mut pxy = SMatrix::<f64, N, M>::zeros();
         for j in 0..L {
             let dy = ys.column(j) - y_pred;
             let dx = xs.column(j) - self.x;
-            pyy += wc[j] * dy * dy.transpose();
-            pxy += wc[j] * dx * dy.transpose();
+            add_weighted_outer(&mut pyy, wc[j], &dy, &dy);
+            add_weighted_outer(&mut pxy, wc[j], &dx, &dy);
         }
         let mut c = correct(&self.x, &self.p, y, &y_pred, pyy, pxy, used)?;
         self.transition.constrain(&mut c.x);
@@ -189,4 +201,36 @@ where
         self.p_chol = Some(c.p_chol);
         Ok(c.innovation)
     }
+}
+
+/// `acc += (w a) b'`, element by element in the order nalgebra's `acc += w * a * b.transpose()`
+/// uses (the same values, bit for bit), without the temporaries: this runs once per sigma point
+/// and step, and the generic expression costs several times the arithmetic.
+#[inline(always)]
+fn add_weighted_outer<const R: usize, const C: usize>(
+    acc: &mut SMatrix<f64, R, C>,
+    w: f64,
+    a: &SVector<f64, R>,
+    b: &SVector<f64, C>,
+) {
+    for c in 0..C {
+        for r in 0..R {
+            acc[(r, c)] += (w * a[r]) * b[c];
+        }
+    }
+}
+
+/// `sum_j w_j col_j(pts)`, the columns taken in order.
+#[inline(always)]
+fn weighted_mean<const R: usize, const L: usize>(
+    pts: &SMatrix<f64, R, L>,
+    w: &SVector<f64, L>,
+) -> SVector<f64, R> {
+    let mut mean = SVector::<f64, R>::zeros();
+    for j in 0..L {
+        for r in 0..R {
+            mean[r] += w[j] * pts[(r, j)];
+        }
+    }
+    mean
 }

@@ -274,9 +274,9 @@ fn check_innovation(name: &str, k: usize, got: &Innovation<2>, want: &Expected) 
         want.nis
     );
     assert!(
-        close(got.log_likelihood, want.log_likelihood),
+        close(got.log_likelihood(), want.log_likelihood),
         "{name} step {k}: log-likelihood {} vs textbook {}",
-        got.log_likelihood,
+        got.log_likelihood(),
         want.log_likelihood
     );
     // Internal consistency of the returned statistics themselves.
@@ -286,7 +286,7 @@ fn check_innovation(name: &str, k: usize, got: &Innovation<2>, want: &Expected) 
     let ll =
         -0.5 * (got.dof as f64 * (2.0 * PI).ln() + got.covariance.determinant().ln() + got.nis);
     assert!(
-        close(got.log_likelihood, ll),
+        close(got.log_likelihood(), ll),
         "{name} step {k}: log-likelihood inconsistent with S and NIS"
     );
 }

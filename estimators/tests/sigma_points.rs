@@ -35,6 +35,18 @@ fn assert_reproduces<const N: usize, const L: usize>(
     let s = cholesky(p)
         .map_err(|pivot| TestCaseError::fail(format!("test P not SPD (pivot {pivot}): {p}")))?;
     let pts = set.generate(x, &s);
+    // The symmetric sets place their points without the dense product; same values, bit for bit.
+    let mut dense = s * set.offsets();
+    for mut col in dense.column_iter_mut() {
+        col += x;
+    }
+    for (got, want) in pts.iter().zip(dense.iter()) {
+        prop_assert!(
+            got.to_bits() == want.to_bits() || (*got == 0.0 && *want == 0.0),
+            "{:?}: point coordinate {got:e} differs from x + S D = {want:e}",
+            set.kind()
+        );
+    }
     let wm = set.mean_weights();
     let wc = set.cov_weights();
     let kind = set.kind();

@@ -423,7 +423,6 @@ mod tests {
             residual: Default::default(),
             covariance: Default::default(),
             nis: 3.5,
-            log_likelihood: 0.0,
             dof: 2,
         };
         let mut d = ChiSquareWindow::<4>::new(&cfg(1, 0.01)).unwrap();

@@ -285,6 +285,13 @@ impl ObservationModel<3, 1, 1> for PositionSensor {
     fn observation_jacobian(&self, _x: &Vector3<f64>, _u: &Vector1<f64>) -> SMatrix<f64, 1, 3> {
         SMatrix::<f64, 1, 3>::new(self.volts_per_state, 0.0, 0.0)
     }
+
+    fn affine_observation(&self, _u: &Vector1<f64>) -> Option<(SMatrix<f64, 1, 3>, Vector1<f64>)> {
+        Some((
+            SMatrix::<f64, 1, 3>::new(self.volts_per_state, 0.0, 0.0),
+            Vector1::zeros(),
+        ))
+    }
 }
 
 /// Wattmeter on the motor supply: `y = i^2` (power into a unit resistance, A^2). It cannot tell
