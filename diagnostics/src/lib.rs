@@ -8,6 +8,9 @@
 //!   candidates, or "unknown".
 //! - [`dtc`]: SAE J2012 codes, the ISO 14229-1 status byte, debouncing and an AUTOSAR-Dem-shaped
 //!   event memory that emits [`event::DiagnosticEvent`]s (documented JSON shape).
+//! - [`evaluation`]: scoring a diagnosis system against ground truth (TDR, FAR, FIA as the DX'25
+//!   competition defines them; per-fault detection and DTC rates and delays; false alarms per
+//!   hour), the bookkeeping behind `fdd evaluate`.
 //! - [`uds`]: the UDS DTC services (ReadDTCInformation `0x19`, ClearDiagnosticInformation
 //!   `0x14`) answered from any [`uds::DtcStore`], with the byte formats fdd uses.
 //!
@@ -16,6 +19,7 @@
 pub mod detectors;
 pub mod dtc;
 pub mod error;
+pub mod evaluation;
 pub mod event;
 pub mod isolation;
 pub mod uds;

@@ -1,0 +1,527 @@
+//! Scoring a diagnosis system against ground truth, with the definitions of the DX'25
+//! diagnostic competition on the LiU-ICE engine (shared/REFERENCE.md §7) plus the per-fault
+//! figures a diagnosis engineer asks for.
+//!
+//! The system under test gives, per sample, a detection flag and a score per fault class (how
+//! strongly it names each class, in `[0, 1]`); the truth gives, per sample, whether a fault is
+//! present and which. Over all samples of all logs:
+//!
+//! - **TDR** (true detection rate): share of faulty samples that are flagged;
+//! - **FAR** (false alarm rate): share of fault-free samples that are flagged;
+//! - **FIA** (fault isolation accuracy): mean score of the true fault over the faulty samples
+//!   that are flagged.
+//!
+//! Per fault class, over its *episodes* (a run of consecutive faulty samples of that class in
+//! one log): the detection rate (episodes with a flag), the correct-DTC rate (episodes during
+//! which a DTC naming the class was raised), and the median and worst delay from the episode's
+//! first faulty sample to the first flag and to the first correct DTC. Over the fault-free time:
+//! false alarms per hour (rising edges of the flag) and DTCs raised per hour.
+//!
+//! Samples the truth marks [`Truth::Ignored`] (a fault present but without effect on anything
+//! measured, or a settling margin) count nowhere; they end no episode.
+//!
+//! This module is pure bookkeeping: no I/O, and allocation only per log and per episode.
+
+use serde::Serialize;
+use thiserror::Error;
+
+/// What the truth says about one sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Truth {
+    /// No fault present.
+    FaultFree,
+    /// Fault class `index` (into the evaluator's classes) present.
+    Faulty(usize),
+    /// Not counted: e.g. a fault that is active but has no effect on any measured signal.
+    Ignored,
+}
+
+/// A bad input to the evaluator, naming what was wrong.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum EvaluationError {
+    #[error("sample at t = {t_s} s: {got} fault scores, expected one per class ({expected})")]
+    ScoreCount {
+        t_s: f64,
+        got: usize,
+        expected: usize,
+    },
+    #[error("sample at t = {t_s} s: score {value} of class `{class}` is outside [0, 1]")]
+    Score { t_s: f64, class: String, value: f64 },
+    #[error("sample at t = {t_s} s: fault class index {index} but only {classes} classes")]
+    Class {
+        t_s: f64,
+        index: usize,
+        classes: usize,
+    },
+    #[error("sample at t = {t_s} s comes before the previous one (t = {previous_s} s)")]
+    TimeOrder { t_s: f64, previous_s: f64 },
+    #[error("time {t_s} s is not finite")]
+    Time { t_s: f64 },
+}
+
+/// Figures of one fault class.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ClassReport {
+    pub class: String,
+    /// Episodes of this fault in the evaluated logs.
+    pub episodes: usize,
+    /// Episodes with at least one flagged sample.
+    pub detected: usize,
+    /// Episodes during which a DTC naming this class was raised.
+    pub correct_dtc: usize,
+    /// Episodes during which a DTC naming another class was raised.
+    pub wrong_dtc: usize,
+    /// `detected / episodes` (NaN without episodes).
+    pub detection_rate: f64,
+    /// `correct_dtc / episodes` (NaN without episodes).
+    pub correct_dtc_rate: f64,
+    /// Median and largest delay (s) from the episode's first faulty sample to its first flag,
+    /// over the detected episodes (NaN when none was).
+    pub median_detection_delay_s: f64,
+    pub worst_detection_delay_s: f64,
+    /// The same to the first correct DTC, over the episodes that got one.
+    pub median_dtc_delay_s: f64,
+    pub worst_dtc_delay_s: f64,
+}
+
+/// The figures over every log given to an [`Evaluator`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EvaluationReport {
+    pub logs: usize,
+    /// Counted samples: faulty, faulty and flagged, fault-free, fault-free and flagged.
+    pub faulty_samples: u64,
+    pub faulty_flagged: u64,
+    pub fault_free_samples: u64,
+    pub fault_free_flagged: u64,
+    /// TDR, FAR and FIA as fractions (NaN when their denominator is zero).
+    pub tdr: f64,
+    pub far: f64,
+    pub fia: f64,
+    /// Fault-free time (h): the sum of the intervals between consecutive fault-free samples.
+    pub fault_free_hours: f64,
+    /// Rising edges of the flag on fault-free samples, and DTCs raised while fault-free.
+    pub false_alarms: u64,
+    pub false_dtcs: u64,
+    pub false_alarms_per_hour: f64,
+    pub false_dtcs_per_hour: f64,
+    pub classes: Vec<ClassReport>,
+}
+
+/// An episode being followed or finished.
+#[derive(Debug, Clone, Copy)]
+struct Episode {
+    class: usize,
+    onset_s: f64,
+    first_flag_s: Option<f64>,
+    first_correct_dtc_s: Option<f64>,
+    wrong_dtc: bool,
+}
+
+/// The state within the log being fed.
+#[derive(Debug, Clone, Copy, Default)]
+struct LogState {
+    previous: Option<(f64, Truth, bool)>,
+    open: Option<Episode>,
+}
+
+/// Accumulates samples and DTCs of any number of logs; see the module documentation.
+#[derive(Debug, Clone)]
+pub struct Evaluator {
+    classes: Vec<String>,
+    logs: usize,
+    faulty: u64,
+    faulty_flagged: u64,
+    free: u64,
+    free_flagged: u64,
+    fia_sum: f64,
+    free_time_s: f64,
+    false_alarms: u64,
+    false_dtcs: u64,
+    episodes: Vec<Episode>,
+    log: LogState,
+}
+
+impl Evaluator {
+    /// An evaluator for these fault classes (the order of every score slice).
+    pub fn new(classes: &[&str]) -> Self {
+        Self {
+            classes: classes.iter().map(|c| c.to_string()).collect(),
+            logs: 0,
+            faulty: 0,
+            faulty_flagged: 0,
+            free: 0,
+            free_flagged: 0,
+            fia_sum: 0.0,
+            free_time_s: 0.0,
+            false_alarms: 0,
+            false_dtcs: 0,
+            episodes: Vec::new(),
+            log: LogState::default(),
+        }
+    }
+
+    /// The fault classes.
+    pub fn classes(&self) -> &[String] {
+        &self.classes
+    }
+
+    /// Index of a class by name.
+    pub fn class_index(&self, name: &str) -> Option<usize> {
+        self.classes.iter().position(|c| c == name)
+    }
+
+    /// Starts a new log: time may start again and no episode continues across logs.
+    pub fn start_log(&mut self) {
+        self.end_log();
+        self.logs += 1;
+    }
+
+    /// Ends the current log (also done by [`Evaluator::start_log`] and [`Evaluator::report`]).
+    pub fn end_log(&mut self) {
+        if let Some(e) = self.log.open.take() {
+            self.episodes.push(e);
+        }
+        self.log.previous = None;
+    }
+
+    /// One sample at `t_s` (s, non-decreasing within a log): the truth, the system's flag and its
+    /// score per class. On error nothing is counted.
+    pub fn sample(
+        &mut self,
+        t_s: f64,
+        truth: Truth,
+        flagged: bool,
+        scores: &[f64],
+    ) -> Result<(), EvaluationError> {
+        self.check_time(t_s)?;
+        if scores.len() != self.classes.len() {
+            return Err(EvaluationError::ScoreCount {
+                t_s,
+                got: scores.len(),
+                expected: self.classes.len(),
+            });
+        }
+        if let Some((i, &value)) = scores
+            .iter()
+            .enumerate()
+            .find(|(_, v)| !(0.0..=1.0).contains(*v))
+        {
+            return Err(EvaluationError::Score {
+                t_s,
+                class: self.classes[i].clone(),
+                value,
+            });
+        }
+        if let Truth::Faulty(index) = truth {
+            if index >= self.classes.len() {
+                return Err(EvaluationError::Class {
+                    t_s,
+                    index,
+                    classes: self.classes.len(),
+                });
+            }
+        }
+        if self.logs == 0 {
+            self.logs = 1;
+        }
+        let previous = self.log.previous;
+        match truth {
+            Truth::FaultFree => {
+                self.close_episode();
+                self.free += 1;
+                if flagged {
+                    self.free_flagged += 1;
+                }
+                if let Some((t0, Truth::FaultFree, was_flagged)) = previous {
+                    self.free_time_s += t_s - t0;
+                    if flagged && !was_flagged {
+                        self.false_alarms += 1;
+                    }
+                } else if flagged {
+                    self.false_alarms += 1;
+                }
+            }
+            Truth::Faulty(class) => {
+                if self.log.open.is_some_and(|e| e.class != class) {
+                    self.close_episode();
+                }
+                let e = self.log.open.get_or_insert(Episode {
+                    class,
+                    onset_s: t_s,
+                    first_flag_s: None,
+                    first_correct_dtc_s: None,
+                    wrong_dtc: false,
+                });
+                self.faulty += 1;
+                if flagged {
+                    self.faulty_flagged += 1;
+                    self.fia_sum += scores[class];
+                    e.first_flag_s.get_or_insert(t_s);
+                }
+            }
+            Truth::Ignored => {}
+        }
+        self.log.previous = Some((t_s, truth, flagged));
+        Ok(())
+    }
+
+    /// A DTC raised (pending or confirmed, as the caller counts) at `t_s` naming fault class
+    /// `class`, or `None` for a DTC that names none of the classes. It belongs to the sample
+    /// most recently given: during an episode it is correct or wrong for that episode; on a
+    /// fault-free sample (or before any) it is a false DTC.
+    pub fn dtc(&mut self, t_s: f64, class: Option<usize>) -> Result<(), EvaluationError> {
+        if !t_s.is_finite() {
+            return Err(EvaluationError::Time { t_s });
+        }
+        if let Some(c) = class {
+            if c >= self.classes.len() {
+                return Err(EvaluationError::Class {
+                    t_s,
+                    index: c,
+                    classes: self.classes.len(),
+                });
+            }
+        }
+        match (&mut self.log.open, self.log.previous) {
+            (Some(e), Some((_, Truth::Faulty(_), _))) => {
+                if class == Some(e.class) {
+                    e.first_correct_dtc_s.get_or_insert(t_s);
+                } else {
+                    e.wrong_dtc = true;
+                }
+            }
+            (_, Some((_, Truth::Ignored, _))) => {}
+            _ => self.false_dtcs += 1,
+        }
+        Ok(())
+    }
+
+    /// The figures over everything given so far (ends the current log).
+    pub fn report(&mut self) -> EvaluationReport {
+        self.end_log();
+        let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+        let hours = self.free_time_s / 3600.0;
+        let classes = (0..self.classes.len())
+            .map(|c| {
+                let eps: Vec<&Episode> = self.episodes.iter().filter(|e| e.class == c).collect();
+                let detected = eps.iter().filter(|e| e.first_flag_s.is_some()).count();
+                let correct = eps
+                    .iter()
+                    .filter(|e| e.first_correct_dtc_s.is_some())
+                    .count();
+                let wrong = eps.iter().filter(|e| e.wrong_dtc).count();
+                let (median_flag, worst_flag) = median_and_max(
+                    eps.iter()
+                        .filter_map(|e| e.first_flag_s.map(|t| t - e.onset_s)),
+                );
+                let (median_dtc, worst_dtc) = median_and_max(
+                    eps.iter()
+                        .filter_map(|e| e.first_correct_dtc_s.map(|t| t - e.onset_s)),
+                );
+                ClassReport {
+                    class: self.classes[c].clone(),
+                    episodes: eps.len(),
+                    detected,
+                    correct_dtc: correct,
+                    wrong_dtc: wrong,
+                    detection_rate: ratio(detected as f64, eps.len() as f64),
+                    correct_dtc_rate: ratio(correct as f64, eps.len() as f64),
+                    median_detection_delay_s: median_flag,
+                    worst_detection_delay_s: worst_flag,
+                    median_dtc_delay_s: median_dtc,
+                    worst_dtc_delay_s: worst_dtc,
+                }
+            })
+            .collect();
+        EvaluationReport {
+            logs: self.logs,
+            faulty_samples: self.faulty,
+            faulty_flagged: self.faulty_flagged,
+            fault_free_samples: self.free,
+            fault_free_flagged: self.free_flagged,
+            tdr: ratio(self.faulty_flagged as f64, self.faulty as f64),
+            far: ratio(self.free_flagged as f64, self.free as f64),
+            fia: ratio(self.fia_sum, self.faulty_flagged as f64),
+            fault_free_hours: hours,
+            false_alarms: self.false_alarms,
+            false_dtcs: self.false_dtcs,
+            false_alarms_per_hour: ratio(self.false_alarms as f64, hours),
+            false_dtcs_per_hour: ratio(self.false_dtcs as f64, hours),
+            classes,
+        }
+    }
+
+    fn close_episode(&mut self) {
+        if let Some(e) = self.log.open.take() {
+            self.episodes.push(e);
+        }
+    }
+
+    fn check_time(&self, t_s: f64) -> Result<(), EvaluationError> {
+        if !t_s.is_finite() {
+            return Err(EvaluationError::Time { t_s });
+        }
+        if let Some((previous_s, _, _)) = self.log.previous {
+            if t_s < previous_s {
+                return Err(EvaluationError::TimeOrder { t_s, previous_s });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Median (mean of the two middle values for an even count) and maximum; NaN for none.
+fn median_and_max(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let mut v: Vec<f64> = values.collect();
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    let median = if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    };
+    (median, v[n - 1])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CLASSES: [&str; 2] = ["tps_bias", "wattmeter"];
+
+    /// A hand-built case whose answers are counted by hand in the comments.
+    #[test]
+    fn figures_of_a_hand_built_case() {
+        let mut ev = Evaluator::new(&CLASSES);
+        // Log 1: 10 fault-free samples at 1 s, flagged at t = 3 and 4 (one false alarm, two
+        // flagged samples), then tps_bias from t = 10 to 19, flagged from t = 12 with scores
+        // 0.75 on tps_bias; a correct DTC at t = 14.
+        ev.start_log();
+        for k in 0..10 {
+            let t = k as f64;
+            ev.sample(t, Truth::FaultFree, k == 3 || k == 4, &[0.0, 0.0])
+                .unwrap();
+        }
+        for k in 10..20 {
+            let t = k as f64;
+            ev.sample(t, Truth::Faulty(0), k >= 12, &[0.75, 0.25])
+                .unwrap();
+            if k == 14 {
+                ev.dtc(t, Some(0)).unwrap();
+            }
+        }
+        // Log 2: wattmeter from the start (t = 0..4), flagged at t = 2..4 with score 0.5 on
+        // it, and a wrong DTC (tps_bias) at t = 3; then 5 fault-free samples (t = 5..9) with a
+        // false DTC at t = 8; time restarts at 0 in a new log.
+        ev.start_log();
+        for k in 0..5 {
+            let t = k as f64;
+            ev.sample(t, Truth::Faulty(1), k >= 2, &[0.5, 0.5]).unwrap();
+            if k == 3 {
+                ev.dtc(t, Some(0)).unwrap();
+            }
+        }
+        for k in 5..10 {
+            let t = k as f64;
+            ev.sample(t, Truth::FaultFree, false, &[0.0, 0.0]).unwrap();
+            if k == 8 {
+                ev.dtc(t, None).unwrap();
+            }
+        }
+        // An ignored sample changes nothing.
+        ev.sample(10.0, Truth::Ignored, true, &[1.0, 0.0]).unwrap();
+        let r = ev.report();
+        assert_eq!(r.logs, 2);
+        // Faulty: 10 + 5 = 15, flagged 8 + 3 = 11. Fault-free: 10 + 5 = 15, flagged 2.
+        assert_eq!((r.faulty_samples, r.faulty_flagged), (15, 11));
+        assert_eq!((r.fault_free_samples, r.fault_free_flagged), (15, 2));
+        assert!((r.tdr - 11.0 / 15.0).abs() < 1e-12);
+        assert!((r.far - 2.0 / 15.0).abs() < 1e-12);
+        // FIA: (8 * 0.75 + 3 * 0.5) / 11.
+        assert!((r.fia - 7.5 / 11.0).abs() < 1e-12);
+        // Fault-free time: 9 s in log 1, 4 s in log 2.
+        assert!((r.fault_free_hours - 13.0 / 3600.0).abs() < 1e-15);
+        assert_eq!((r.false_alarms, r.false_dtcs), (1, 1));
+        assert!((r.false_alarms_per_hour - 3600.0 / 13.0).abs() < 1e-9);
+        let tps = &r.classes[0];
+        assert_eq!(
+            (tps.episodes, tps.detected, tps.correct_dtc, tps.wrong_dtc),
+            (1, 1, 1, 0)
+        );
+        assert_eq!(tps.median_detection_delay_s, 2.0);
+        assert_eq!(tps.worst_dtc_delay_s, 4.0);
+        let watt = &r.classes[1];
+        assert_eq!(
+            (
+                watt.episodes,
+                watt.detected,
+                watt.correct_dtc,
+                watt.wrong_dtc
+            ),
+            (1, 1, 0, 1)
+        );
+        assert_eq!(watt.correct_dtc_rate, 0.0);
+        assert_eq!(watt.median_detection_delay_s, 2.0);
+        assert!(watt.median_dtc_delay_s.is_nan());
+    }
+
+    #[test]
+    fn episodes_split_on_a_class_change_and_delays_take_the_median() {
+        let mut ev = Evaluator::new(&CLASSES);
+        // Three tps_bias episodes separated by fault-free samples, detected after 1, 3 and 2 s;
+        // then a wattmeter episode right after a tps_bias one (no fault-free sample between).
+        let mut t = 0.0;
+        for delay in [1.0, 3.0, 2.0] {
+            ev.sample(t, Truth::FaultFree, false, &[0.0, 0.0]).unwrap();
+            t += 1.0;
+            let onset = t;
+            for _ in 0..5 {
+                ev.sample(t, Truth::Faulty(0), t - onset >= delay, &[1.0, 0.0])
+                    .unwrap();
+                t += 1.0;
+            }
+        }
+        ev.sample(t, Truth::Faulty(1), false, &[0.0, 0.0]).unwrap();
+        let r = ev.report();
+        assert_eq!(r.classes[0].episodes, 3);
+        assert_eq!(r.classes[0].median_detection_delay_s, 2.0);
+        assert_eq!(r.classes[0].worst_detection_delay_s, 3.0);
+        assert_eq!(r.classes[1].episodes, 1);
+        assert_eq!(r.classes[1].detected, 0);
+        assert_eq!(r.classes[1].detection_rate, 0.0);
+        assert_eq!(r.fia, 1.0);
+    }
+
+    #[test]
+    fn bad_samples_are_refused_and_count_nothing() {
+        let mut ev = Evaluator::new(&CLASSES);
+        ev.sample(1.0, Truth::FaultFree, false, &[0.0, 0.0])
+            .unwrap();
+        assert!(matches!(
+            ev.sample(2.0, Truth::FaultFree, false, &[0.0]),
+            Err(EvaluationError::ScoreCount { got: 1, .. })
+        ));
+        let e = ev
+            .sample(2.0, Truth::Faulty(0), true, &[1.5, 0.0])
+            .unwrap_err();
+        assert!(e.to_string().contains("tps_bias"), "{e}");
+        assert!(matches!(
+            ev.sample(2.0, Truth::Faulty(2), true, &[0.0, 0.0]),
+            Err(EvaluationError::Class { index: 2, .. })
+        ));
+        assert!(matches!(
+            ev.sample(0.5, Truth::FaultFree, false, &[0.0, 0.0]),
+            Err(EvaluationError::TimeOrder { .. })
+        ));
+        assert!(ev
+            .sample(f64::NAN, Truth::FaultFree, false, &[0.0, 0.0])
+            .is_err());
+        assert!(ev.dtc(2.0, Some(5)).is_err());
+        let r = ev.report();
+        assert_eq!((r.fault_free_samples, r.faulty_samples), (1, 0));
+        assert!(r.tdr.is_nan());
+    }
+}
