@@ -625,3 +625,76 @@ fn the_primary_filter_gives_the_output() {
         );
     }
 }
+
+/// Circuit low is judged against the model. Tip-outs from 5000-5800 rpm to a closed plate
+/// (simulated: the truth simulator's manifold, pulsation and sensor noise) pull the manifold
+/// far below `map_low_pa` for many segments in a row, and the MAF then reads only the plate's
+/// leakage, below `maf_low_kg_s`: a healthy pair of sensors, so nothing may be raised. Then, at
+/// idle, a MAP reading 0 Pa (open circuit) where the model puts the manifold at idle pressure is
+/// the circuit-low DTC after `circuit_persist_segments`.
+#[test]
+fn circuit_low_only_where_the_model_rules_the_reading_out() {
+    let cfg = IntakeMonitorConfig::default();
+    let profile = ProfileSpec::TipInOut(TipInOutSpec {
+        low_throttle_deg: 0.0,
+        speed_rpm: [5000.0, 5800.0],
+        ..TipInOutSpec::default()
+    });
+    let sc = IntakeScenario::new("overrun", 30.0, 7, profile, IntakeFault::None);
+    let frames: Vec<Frame> = sim_frames(sc).collect();
+    // The longest run of MAP readings below the limit.
+    let (mut run_len, mut longest) = (0u32, 0u32);
+    for f in &frames {
+        run_len = if f.seg.map_pa < cfg.map_low_pa {
+            run_len + 1
+        } else {
+            0
+        };
+        longest = longest.max(run_len);
+    }
+    assert!(
+        longest >= 5 * cfg.circuit_persist_segments,
+        "the drive reaches the circuit-low range: {longest} segments in a row"
+    );
+    let o = run(frames.into_iter());
+    assert!(
+        o.raised.is_empty(),
+        "healthy sensors at overrun: {:?}",
+        o.raised
+    );
+
+    let model = default_intake_model();
+    let mut mon = IntakeMonitor::new(&model, &cfg, &table()).expect("monitor");
+    mon.start_operation_cycle(0, &mut |_| {});
+    let mut raised = Vec::new();
+    for k in 0..60u64 {
+        // Sensor noise (a reading repeated exactly is a stuck sensor): +-100 Pa, +-0.5 %.
+        let wiggle = (k % 7) as f64 - 3.0;
+        let mut seg = segment(1500.0, 0.0);
+        seg.map_pa = if k < 50 {
+            seg_idle_map() + 33.0 * wiggle
+        } else {
+            0.0
+        };
+        seg.maf_kg_s *= 1.0 + 0.0017 * wiggle;
+        mon.process_segment((k + 1) * 10_000_000, &seg, &mut |o| {
+            if let Output::Event(ev) = o {
+                if ev.bit_changed(StatusBit::TestFailed) && ev.status_after.test_failed() {
+                    raised.push(ev.event.to_string());
+                }
+            }
+        });
+        if k == 49 {
+            assert!(raised.is_empty(), "healthy idle: {raised:?}");
+        }
+    }
+    assert_eq!(raised, vec!["map_circuit_low".to_string()]);
+}
+
+/// The model's idle manifold pressure for [`segment`] (1500 rpm, 5 deg).
+fn seg_idle_map() -> f64 {
+    let u = fdd_estimators::models::intake::IntakeInput::new(1500.0, 5.0, 0.0);
+    default_intake_model()
+        .equilibrium(&u)
+        .expect("steady state")[0]
+}

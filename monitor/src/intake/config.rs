@@ -66,8 +66,19 @@ pub struct IntakeMonitorConfig {
     /// `maf_high_kg_s`, for `circuit_persist_segments` segments in a row, is a circuit fault.
     /// Such readings never reach the filters.
     pub map_low_pa: f64,
+    /// A MAP reading below `map_low_pa` is a circuit fault only while the filter's estimate
+    /// of the sensor's pressure, less three standard deviations, stays above `map_low_pa +
+    /// map_low_margin_pa` (Pa): a manifold really that low (a closed-throttle tip-out from high
+    /// speed reaches 10 kPa) is what a healthy sensor reports, and the model knows it. Before
+    /// the filters start, the model's steady state for the segment's inputs stands for the
+    /// estimate. The throttle monitor judges its TPS rails the same way.
+    pub map_low_margin_pa: f64,
     pub map_high_ratio: f64,
     pub maf_low_kg_s: f64,
+    /// The same for MAF below `maf_low_kg_s` (kg/s): it counts only while the filter's
+    /// estimate of the sensor's flow less three standard deviations is above `maf_low_kg_s +
+    /// maf_low_margin_kg_s` (a closed plate at high speed passes only its leakage flow).
+    pub maf_low_margin_kg_s: f64,
     pub maf_high_kg_s: f64,
     pub circuit_persist_segments: u32,
     /// A MAP or MAF reading repeated exactly this many segments in a row is a stuck sensor
@@ -142,8 +153,10 @@ impl Default for IntakeMonitorConfig {
             maf_noise_rel: 0.015,
             federated_shares: [0.5, 0.5],
             map_low_pa: 10_000.0,
+            map_low_margin_pa: 5_000.0,
             map_high_ratio: 1.10,
             maf_low_kg_s: 5e-4,
+            maf_low_margin_kg_s: 1e-3,
             maf_high_kg_s: 0.25,
             circuit_persist_segments: 10,
             frozen_segments: 10,

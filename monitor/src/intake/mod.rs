@@ -379,7 +379,9 @@ impl IntakeMonitor {
         }
         for (key, v) in [
             ("map_low_pa", cfg.map_low_pa),
+            ("map_low_margin_pa", cfg.map_low_margin_pa),
             ("maf_low_kg_s", cfg.maf_low_kg_s),
+            ("maf_low_margin_kg_s", cfg.maf_low_margin_kg_s),
             ("throttle_model_rel", cfg.throttle_model_rel),
             ("isolation_margin", cfg.isolation_margin),
             ("isolation_min_s", cfg.isolation_min_s),
@@ -683,16 +685,33 @@ impl IntakeMonitor {
 
         // Circuit range checks (the readings that fail them never reach the filters).
         let p_a = self.model.params().ambient_pressure_pa;
+        // A low reading counts against the sensor only where the model rules such a value
+        // out (NaN always does): the filter's estimate of the sensor's output (p_mes, W_mes),
+        // less 3 sigma, above the limit plus a margin; before the filters run, the model's
+        // steady state for this segment's inputs above it (computed only for a low reading).
+        let ruled_out = |i: usize, limit: f64| match &self.filters {
+            Some(f) => {
+                let sigma = f.central.covariance()[(i, i)].max(0.0).sqrt();
+                f.central.state()[i] - 3.0 * sigma > limit
+            }
+            None => self.model.equilibrium(&u).is_none_or(|x| x[i] > limit),
+        };
+        let map_low = seg.map_pa.is_nan()
+            || (seg.map_pa < self.cfg.map_low_pa
+                && ruled_out(1, self.cfg.map_low_pa + self.cfg.map_low_margin_pa));
+        let maf_low = seg.maf_kg_s.is_nan()
+            || (seg.maf_kg_s < self.cfg.maf_low_kg_s
+                && ruled_out(3, self.cfg.maf_low_kg_s + self.cfg.maf_low_margin_kg_s));
         let map_ok = Self::circuit(
             &mut self.map_low_run,
             &mut self.map_high_run,
-            !(seg.map_pa >= self.cfg.map_low_pa),
+            map_low,
             seg.map_pa > self.cfg.map_high_ratio * p_a,
         );
         let maf_ok = Self::circuit(
             &mut self.maf_low_run,
             &mut self.maf_high_run,
-            !(seg.maf_kg_s >= self.cfg.maf_low_kg_s),
+            maf_low,
             seg.maf_kg_s > self.cfg.maf_high_kg_s,
         );
         let circuit_result = |ok: bool, v: f64, lo: f64, hi: f64| TestResult {
