@@ -163,18 +163,28 @@ where
     ) -> Result<Innovation<M>, FilterError> {
         check_input(u)?;
         check_measurement(y, used)?;
-        if let Some((h, d)) = self.observation.affine_observation(u) {
-            // A linear sensor: the sigma points would give these moments exactly.
-            let y_pred = h * self.x + d;
-            let pxy = self.p * h.transpose();
-            let pyy = h * pxy + self.r;
-            let mut c = correct(&self.x, &self.p, y, &y_pred, pyy, pxy, used)?;
-            self.transition.constrain(&mut c.x);
-            self.x = c.x;
-            self.p = c.p;
-            self.p_chol = Some(c.p_chol);
-            return Ok(c.innovation);
-        }
+        let (y_pred, pyy, pxy) = match self.observation.affine_observation(u) {
+            Some((h, d)) => {
+                // A linear sensor: the sigma points would give these moments exactly.
+                let pxy = self.p * h.transpose();
+                (h * self.x + d, h * pxy + self.r, pxy)
+            }
+            None => self.unscented_measurement_moments(u)?,
+        };
+        let mut c = correct(&self.x, &self.p, y, &y_pred, pyy, pxy, used)?;
+        self.transition.constrain(&mut c.x);
+        self.x = c.x;
+        self.p = c.p;
+        self.p_chol = Some(c.p_chol);
+        Ok(c.innovation)
+    }
+
+    /// `y_pred`, `Pyy` (with `R`) and `Pxy` from sigma points drawn from the prediction.
+    #[allow(clippy::type_complexity)]
+    fn unscented_measurement_moments(
+        &self,
+        u: &SVector<f64, U>,
+    ) -> Result<(SVector<f64, M>, SMatrix<f64, M, M>, SMatrix<f64, N, M>), FilterError> {
         let s = cholesky(&self.p).map_err(|pivot| FilterError::NotPositiveDefinite {
             which: "state covariance",
             pivot,
@@ -194,12 +204,7 @@ where
             add_weighted_outer(&mut pyy, wc[j], &dy, &dy);
             add_weighted_outer(&mut pxy, wc[j], &dx, &dy);
         }
-        let mut c = correct(&self.x, &self.p, y, &y_pred, pyy, pxy, used)?;
-        self.transition.constrain(&mut c.x);
-        self.x = c.x;
-        self.p = c.p;
-        self.p_chol = Some(c.p_chol);
-        Ok(c.innovation)
+        Ok((y_pred, pyy, pxy))
     }
 }
 
