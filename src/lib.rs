@@ -4,6 +4,7 @@
 //! `fdd-fixtures`, ...); this crate wires them to files and commands.
 
 pub mod config;
+pub mod evaluate;
 pub mod replay;
 pub mod reproduce;
 pub mod simulate;

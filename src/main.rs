@@ -73,6 +73,23 @@ enum Command {
         #[arg(long, value_name = "FILE")]
         memory: Option<PathBuf>,
     },
+    /// Score the monitors on logs with ground truth: TDR, FAR and FIA (the DX'25 diagnostic
+    /// competition's definitions), and per fault type the detection rate, the DTC rates and
+    /// the median and worst delays; false alarms per hour of fault-free time.
+    ///
+    /// Each input is an MCAP log with truth topics, a scenario file (.toml, simulated first
+    /// into a temporary log), or a directory of them (its .mcap and .toml files).
+    Evaluate {
+        /// Logs, scenario files or directories.
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// Runtime configuration (default: the embedded config/fdd.toml).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Print the figures as JSON instead of tables.
+        #[arg(long)]
+        json: bool,
+    },
     /// Reproduce a result from one of the source papers.
     Reproduce {
         #[command(subcommand)]
@@ -205,6 +222,23 @@ fn run(command: Command) -> Result<()> {
                 );
             }
             Ok(())
+        }
+        Command::Evaluate {
+            inputs,
+            config,
+            json,
+        } => {
+            let cfg = RuntimeConfig::load(config.as_deref())?;
+            let summary = fdd::evaluate::evaluate(&inputs, &cfg, |i, n, file| {
+                tracing::info!("[{}/{n}] {}", i + 1, file.display());
+            })?;
+            if json {
+                let mut text = serde_json::to_string_pretty(&summary)?;
+                text.push('\n');
+                emit(&text)
+            } else {
+                emit(&summary.render())
+            }
         }
         Command::Simulate {
             scenario,

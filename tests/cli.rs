@@ -118,3 +118,61 @@ fn a_closed_stdout_ends_the_replay_quietly() {
     assert!(!err.contains("panicked"), "{err}");
     assert!(out.status.success(), "{:?}: {err}", out.status);
 }
+
+/// `fdd evaluate` on a log and a scenario file (simulated on the fly): the JSON figures say
+/// what happened, and each episode is judged against the right fault type.
+#[test]
+fn evaluate_scores_logs_and_scenarios_against_their_truth() {
+    let out = fdd()
+        .args(["evaluate", "--json"])
+        .arg(root().join("fixtures/data/throttle_tps_open.mcap"))
+        .arg(root().join("fixtures/scenarios/throttle_wattmeter.toml"))
+        .output()
+        .expect("run");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert_eq!(v["logs"].as_array().map(Vec::len), Some(2));
+    let m = &v["monitors"][0];
+    assert_eq!(m["monitor"], "throttle");
+    assert_eq!(m["logs"], 2);
+    // No fault-free sample is flagged on either log before its onset (10 s each).
+    assert_eq!(m["fault_free_flagged"], 0);
+    assert_eq!(m["false_dtcs"], 0);
+    let tdr = m["tdr"].as_f64().expect("tdr");
+    assert!(tdr > 0.9 && tdr <= 1.0, "TDR {tdr}");
+    let class = |name: &str| {
+        m["classes"]
+            .as_array()
+            .and_then(|c| c.iter().find(|c| c["class"] == name))
+            .unwrap_or_else(|| panic!("class {name}"))
+            .clone()
+    };
+    for name in ["tps_open", "wattmeter"] {
+        let c = class(name);
+        assert_eq!(c["episodes"], 1, "{name}: {c}");
+        assert_eq!(c["correct_dtc"], 1, "{name}: {c}");
+        assert_eq!(c["wrong_dtc"], 0, "{name}: {c}");
+    }
+    assert_eq!(class("tps_bias")["episodes"], 0);
+
+    // The tables name the figures; a file that is neither a log nor a scenario is refused.
+    let out = fdd()
+        .arg("evaluate")
+        .arg(root().join("fixtures/data/throttle_tps_open.mcap"))
+        .output()
+        .expect("run");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("TDR") && text.contains("tps_open"), "{text}");
+    let out = fdd()
+        .arg("evaluate")
+        .arg(root().join("README.md"))
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("README.md") && err.contains("neither"), "{err}");
+}

@@ -404,7 +404,10 @@ fn out_writes_an_mcap_of_the_outputs() {
                 m.decode::<fdd_monitor::log::DtcStatusMsg>()
                     .expect("status"),
             ),
-            "/fdd/throttle/position" | "/fdd/throttle/innovation" | "/fdd/tests" => per_step += 1,
+            "/fdd/throttle/position"
+            | "/fdd/throttle/innovation"
+            | "/fdd/tests"
+            | "/fdd/diagnosis" => per_step += 1,
             other => panic!("unexpected topic {other}"),
         }
     }

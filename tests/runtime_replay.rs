@@ -102,6 +102,26 @@ fn every_fixture_replays_to_the_recorded_events() {
         recorded.keys().cloned().collect::<Vec<_>>(),
         "every fixture has a recording and every recording a fixture"
     );
+    // `FDD_BLESS=1 cargo test --release --test runtime_replay` rewrites the recording after a
+    // deliberate change of behaviour (review its diff before committing).
+    if std::env::var_os("FDD_BLESS").is_some() {
+        let mut text = String::from(
+            "# DTC status changes of `fdd replay` on every fixture; tests/runtime_replay.rs checks\n\
+             # they are unchanged (FDD_BLESS=1 rewrites this file after a deliberate change).\n\
+             # fixture time_s event dtc trigger status_before status_after memory\n",
+        );
+        for name in &names {
+            for line in replayed(&fixtures().join(format!("{name}.mcap")), &cfg) {
+                text.push_str(&format!("{name} {line}\n"));
+            }
+        }
+        std::fs::write(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/replay_events.txt"),
+            text,
+        )
+        .expect("write tests/data/replay_events.txt");
+        return;
+    }
     let mut total = 0;
     for name in &names {
         let got = replayed(&fixtures().join(format!("{name}.mcap")), &cfg);

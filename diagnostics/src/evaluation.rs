@@ -12,10 +12,13 @@
 //!   that are flagged.
 //!
 //! Per fault class, over its *episodes* (a run of consecutive faulty samples of that class in
-//! one log): the detection rate (episodes with a flag), the correct-DTC rate (episodes during
-//! which a DTC naming the class was raised), and the median and worst delay from the episode's
-//! first faulty sample to the first flag and to the first correct DTC. Over the fault-free time:
-//! false alarms per hour (rising edges of the flag) and DTCs raised per hour.
+//! one log): the detection rate (episodes with a flag), the DTC rate (episodes during which any
+//! DTC was raised), the correct-DTC rate (episodes during which a specific DTC naming the class
+//! was raised), the group-DTC figures (a group DTC names several candidate classes when
+//! isolation cannot decide yet: did its candidates include the true one?), and the median and
+//! worst delay from the episode's first faulty sample to the first flag, the first DTC and the
+//! first correct specific DTC. Over the fault-free time: false alarms per hour (rising edges of
+//! the flag) and DTCs raised per hour.
 //!
 //! Samples the truth marks [`Truth::Ignored`] (a fault present but without effect on anything
 //! measured, or a settling margin) count nowhere; they end no episode.
@@ -67,21 +70,43 @@ pub struct ClassReport {
     pub episodes: usize,
     /// Episodes with at least one flagged sample.
     pub detected: usize,
-    /// Episodes during which a DTC naming this class was raised.
+    /// Episodes during which any DTC (specific or group) was raised.
+    pub any_dtc: usize,
+    /// Episodes during which a specific DTC naming this class was raised.
     pub correct_dtc: usize,
-    /// Episodes during which a DTC naming another class was raised.
+    /// Episodes during which a specific DTC not naming this class was raised.
     pub wrong_dtc: usize,
+    /// Episodes during which a group DTC was raised, and those of them in which a group DTC's
+    /// candidates did not include this class.
+    pub group_dtc: usize,
+    pub group_missed: usize,
     /// `detected / episodes` (NaN without episodes).
     pub detection_rate: f64,
+    /// `any_dtc / episodes` (NaN without episodes).
+    pub dtc_rate: f64,
     /// `correct_dtc / episodes` (NaN without episodes).
     pub correct_dtc_rate: f64,
     /// Median and largest delay (s) from the episode's first faulty sample to its first flag,
     /// over the detected episodes (NaN when none was).
     pub median_detection_delay_s: f64,
     pub worst_detection_delay_s: f64,
-    /// The same to the first correct DTC, over the episodes that got one.
+    /// The same to the first DTC of any kind, over the episodes that got one.
+    pub median_any_dtc_delay_s: f64,
+    pub worst_any_dtc_delay_s: f64,
+    /// The same to the first correct specific DTC, over the episodes that got one.
     pub median_dtc_delay_s: f64,
     pub worst_dtc_delay_s: f64,
+}
+
+/// What a raised DTC says about the fault.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DtcKind {
+    /// A specific DTC: correct for exactly the classes given (e.g. every fault type of one
+    /// sensor's DTC family).
+    Specific,
+    /// A group DTC (e.g. P0068): detected but not isolated; the classes given are its
+    /// candidates.
+    Group,
 }
 
 /// The figures over every log given to an [`Evaluator`].
@@ -113,8 +138,11 @@ struct Episode {
     class: usize,
     onset_s: f64,
     first_flag_s: Option<f64>,
+    first_dtc_s: Option<f64>,
     first_correct_dtc_s: Option<f64>,
     wrong_dtc: bool,
+    group_dtc: bool,
+    group_missed: bool,
 }
 
 /// The state within the log being fed.
@@ -249,8 +277,11 @@ impl Evaluator {
                     class,
                     onset_s: t_s,
                     first_flag_s: None,
+                    first_dtc_s: None,
                     first_correct_dtc_s: None,
                     wrong_dtc: false,
+                    group_dtc: false,
+                    group_missed: false,
                 });
                 self.faulty += 1;
                 if flagged {
@@ -265,29 +296,41 @@ impl Evaluator {
         Ok(())
     }
 
-    /// A DTC raised (pending or confirmed, as the caller counts) at `t_s` naming fault class
-    /// `class`, or `None` for a DTC that names none of the classes. It belongs to the sample
-    /// most recently given: during an episode it is correct or wrong for that episode; on a
-    /// fault-free sample (or before any) it is a false DTC.
-    pub fn dtc(&mut self, t_s: f64, class: Option<usize>) -> Result<(), EvaluationError> {
+    /// A DTC raised (pending or confirmed, as the caller counts) at `t_s`: a specific DTC
+    /// correct for the fault classes `classes` (empty: it names none of them), or a group DTC
+    /// whose candidates are `classes`. It belongs to the sample most recently given: during an
+    /// episode it counts for that episode; on a fault-free sample (or before any) it is a false
+    /// DTC.
+    pub fn dtc(
+        &mut self,
+        t_s: f64,
+        classes: &[usize],
+        kind: DtcKind,
+    ) -> Result<(), EvaluationError> {
         if !t_s.is_finite() {
             return Err(EvaluationError::Time { t_s });
         }
-        if let Some(c) = class {
-            if c >= self.classes.len() {
-                return Err(EvaluationError::Class {
-                    t_s,
-                    index: c,
-                    classes: self.classes.len(),
-                });
-            }
+        if let Some(&c) = classes.iter().find(|&&c| c >= self.classes.len()) {
+            return Err(EvaluationError::Class {
+                t_s,
+                index: c,
+                classes: self.classes.len(),
+            });
         }
         match (&mut self.log.open, self.log.previous) {
             (Some(e), Some((_, Truth::Faulty(_), _))) => {
-                if class == Some(e.class) {
-                    e.first_correct_dtc_s.get_or_insert(t_s);
-                } else {
-                    e.wrong_dtc = true;
+                e.first_dtc_s.get_or_insert(t_s);
+                let names_it = classes.contains(&e.class);
+                match (kind, names_it) {
+                    (DtcKind::Specific, true) => {
+                        e.first_correct_dtc_s.get_or_insert(t_s);
+                    }
+                    (DtcKind::Specific, false) => e.wrong_dtc = true,
+                    (DtcKind::Group, true) => e.group_dtc = true,
+                    (DtcKind::Group, false) => {
+                        e.group_dtc = true;
+                        e.group_missed = true;
+                    }
                 }
             }
             (_, Some((_, Truth::Ignored, _))) => {}
@@ -310,6 +353,13 @@ impl Evaluator {
                     .filter(|e| e.first_correct_dtc_s.is_some())
                     .count();
                 let wrong = eps.iter().filter(|e| e.wrong_dtc).count();
+                let any = eps.iter().filter(|e| e.first_dtc_s.is_some()).count();
+                let group = eps.iter().filter(|e| e.group_dtc).count();
+                let group_missed = eps.iter().filter(|e| e.group_missed).count();
+                let (median_any, worst_any) = median_and_max(
+                    eps.iter()
+                        .filter_map(|e| e.first_dtc_s.map(|t| t - e.onset_s)),
+                );
                 let (median_flag, worst_flag) = median_and_max(
                     eps.iter()
                         .filter_map(|e| e.first_flag_s.map(|t| t - e.onset_s)),
@@ -322,12 +372,18 @@ impl Evaluator {
                     class: self.classes[c].clone(),
                     episodes: eps.len(),
                     detected,
+                    any_dtc: any,
                     correct_dtc: correct,
                     wrong_dtc: wrong,
+                    group_dtc: group,
+                    group_missed,
                     detection_rate: ratio(detected as f64, eps.len() as f64),
+                    dtc_rate: ratio(any as f64, eps.len() as f64),
                     correct_dtc_rate: ratio(correct as f64, eps.len() as f64),
                     median_detection_delay_s: median_flag,
                     worst_detection_delay_s: worst_flag,
+                    median_any_dtc_delay_s: median_any,
+                    worst_any_dtc_delay_s: worst_any,
                     median_dtc_delay_s: median_dtc,
                     worst_dtc_delay_s: worst_dtc,
                 }
@@ -410,7 +466,7 @@ mod tests {
             ev.sample(t, Truth::Faulty(0), k >= 12, &[0.75, 0.25])
                 .unwrap();
             if k == 14 {
-                ev.dtc(t, Some(0)).unwrap();
+                ev.dtc(t, &[0], DtcKind::Specific).unwrap();
             }
         }
         // Log 2: wattmeter from the start (t = 0..4), flagged at t = 2..4 with score 0.5 on
@@ -421,14 +477,14 @@ mod tests {
             let t = k as f64;
             ev.sample(t, Truth::Faulty(1), k >= 2, &[0.5, 0.5]).unwrap();
             if k == 3 {
-                ev.dtc(t, Some(0)).unwrap();
+                ev.dtc(t, &[0], DtcKind::Specific).unwrap();
             }
         }
         for k in 5..10 {
             let t = k as f64;
             ev.sample(t, Truth::FaultFree, false, &[0.0, 0.0]).unwrap();
             if k == 8 {
-                ev.dtc(t, None).unwrap();
+                ev.dtc(t, &[], DtcKind::Specific).unwrap();
             }
         }
         // An ignored sample changes nothing.
@@ -466,6 +522,61 @@ mod tests {
         assert_eq!(watt.correct_dtc_rate, 0.0);
         assert_eq!(watt.median_detection_delay_s, 2.0);
         assert!(watt.median_dtc_delay_s.is_nan());
+    }
+
+    #[test]
+    fn group_then_specific_dtcs_are_counted_per_episode() {
+        let mut ev = Evaluator::new(&["map_bias", "leak", "egr"]);
+        // Episode 1 (leak, t = 0..9): a group DTC naming {leak, egr} at t = 1, the specific leak
+        // DTC at t = 4. Episode 2 (map_bias, t = 20..29, after fault-free 10..19): a group DTC
+        // naming {leak, egr} at t = 21 (misses the truth), a wrong specific DTC (egr) at t = 23.
+        for k in 0..30 {
+            let t = f64::from(k);
+            let truth = match k {
+                0..=9 => Truth::Faulty(1),
+                10..=19 => Truth::FaultFree,
+                _ => Truth::Faulty(0),
+            };
+            ev.sample(t, truth, !(10..=19).contains(&k), &[0.0; 3])
+                .unwrap();
+            match k {
+                1 | 21 => ev.dtc(t, &[1, 2], DtcKind::Group).unwrap(),
+                4 => ev.dtc(t, &[1], DtcKind::Specific).unwrap(),
+                23 => ev.dtc(t, &[2], DtcKind::Specific).unwrap(),
+                _ => {}
+            }
+        }
+        let r = ev.report();
+        let leak = &r.classes[1];
+        assert_eq!(
+            (
+                leak.any_dtc,
+                leak.group_dtc,
+                leak.group_missed,
+                leak.correct_dtc
+            ),
+            (1, 1, 0, 1)
+        );
+        assert_eq!(leak.median_any_dtc_delay_s, 1.0);
+        assert_eq!(leak.median_dtc_delay_s, 4.0);
+        let map = &r.classes[0];
+        assert_eq!(
+            (
+                map.any_dtc,
+                map.group_dtc,
+                map.group_missed,
+                map.correct_dtc,
+                map.wrong_dtc
+            ),
+            (1, 1, 1, 0, 1)
+        );
+        assert_eq!(map.worst_any_dtc_delay_s, 1.0);
+        assert!(map.median_dtc_delay_s.is_nan());
+        assert_eq!(r.false_dtcs, 0);
+        assert!(matches!(
+            ev.dtc(30.0, &[3], DtcKind::Group),
+            Err(EvaluationError::Class { index: 3, .. })
+        ));
     }
 
     #[test]
@@ -519,7 +630,7 @@ mod tests {
         assert!(ev
             .sample(f64::NAN, Truth::FaultFree, false, &[0.0, 0.0])
             .is_err());
-        assert!(ev.dtc(2.0, Some(5)).is_err());
+        assert!(ev.dtc(2.0, &[5], DtcKind::Specific).is_err());
         let r = ev.report();
         assert_eq!((r.fault_free_samples, r.faulty_samples), (1, 0));
         assert!(r.tdr.is_nan());

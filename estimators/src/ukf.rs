@@ -77,6 +77,19 @@ where
         &self.p
     }
 
+    /// Measurement noise covariance `R`.
+    pub fn measurement_noise(&self) -> &SMatrix<f64, M, M> {
+        &self.r
+    }
+
+    /// Replaces `R`, e.g. with an online estimate of the sensor noise. It must be symmetric
+    /// positive definite; on error nothing changes.
+    pub fn set_measurement_noise(&mut self, r: SMatrix<f64, M, M>) -> Result<(), ConfigError> {
+        check_covariance("R", &r, true)?;
+        self.r = r;
+        Ok(())
+    }
+
     /// The sigma-point set in use.
     pub fn sigma_points(&self) -> &SigmaPoints<N, L> {
         &self.points

@@ -44,6 +44,12 @@ pub enum Output<'a> {
     DtcStatus { dtc: Dtc, status: DtcStatus },
     /// A status change of the event memory (borrowed; [`EventView::to_event`] owns it).
     Event(&'a EventView<'a>),
+    /// The monitor's diagnosis after this step, reported once per step: whether it considers
+    /// its subsystem faulty now (`flagged`: a test is failing, a fault is being isolated or a
+    /// decided fault is still present), and a score in `[0, 1]` per fault class of
+    /// [`Monitor::fault_classes`] (how strongly it names each; all 0 when not flagged). This is
+    /// the per-sample output that TDR, FAR and FIA are computed from (`fdd evaluate`).
+    Diagnosis { flagged: bool, scores: &'a [f64] },
 }
 
 /// The sink a monitor reports into.
@@ -59,6 +65,12 @@ pub trait Monitor {
 
     /// The signals the monitor reads (for staleness reporting and documentation).
     fn inputs(&self) -> &[SignalId];
+
+    /// The fault classes its [`Output::Diagnosis`] scores, in the order of the scores (e.g.
+    /// `tps_stuck`, `wattmeter`). Empty for a monitor that reports no diagnosis.
+    fn fault_classes(&self) -> &'static [&'static str] {
+        &[]
+    }
 
     /// One step at time `now_ns`. Must not allocate in its steady state (no status change).
     fn step(&mut self, now_ns: u64, signals: &SignalTable, out: &mut OutputSink<'_>);

@@ -107,9 +107,9 @@ impl Scheduler {
         e.enabled = on;
     }
 
-    /// Whether the steps' innovations and test statistics reach the sink (default true). A
-    /// host that only wants events, status bytes and estimates turns them off, and the
-    /// outputs of a step stop at the monitor's own callback.
+    /// Whether the steps' innovations, test statistics and diagnoses reach the sink (default
+    /// true). A host that only wants events, status bytes and estimates turns them off, and
+    /// the outputs of a step stop at the monitor's own callback.
     pub fn set_detail(&mut self, on: bool) {
         self.detail = on;
     }
@@ -142,7 +142,10 @@ impl Scheduler {
                 e.monitor.step(due, signals, &mut |o| out(i, due, o));
             } else {
                 e.monitor.step(due, signals, &mut |o| {
-                    if !matches!(o, Output::Innovation { .. } | Output::Test { .. }) {
+                    if !matches!(
+                        o,
+                        Output::Innovation { .. } | Output::Test { .. } | Output::Diagnosis { .. }
+                    ) {
                         out(i, due, o)
                     }
                 });

@@ -58,6 +58,8 @@ use fdd_monitor::runtime::{Runtime, RuntimeError, Stamped};
 use fdd_monitor::signal_table::SignalId;
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::evaluate::Evaluation;
+
 pub use config::RuntimeConfig;
 pub use fdd_monitor::staleness::StalenessMonitor;
 pub use problems::{Problem, ProblemKind};
@@ -153,7 +155,7 @@ struct Replayer<'c> {
 
 /// The replay's sink: every runtime output to the collectors and writers.
 fn sink_of(sinks: &mut Sinks) -> impl FnMut(Stamped<'_>) + '_ {
-    |o: Stamped<'_>| sinks.on_output(o.t_ns, o.output)
+    |o: Stamped<'_>| sinks.on_output(o.t_ns, o.monitor, o.output)
 }
 
 impl Replayer<'_> {
@@ -337,6 +339,9 @@ impl Replayer<'_> {
                     } else {
                         tm.value
                     };
+                    if let Some(ev) = sinks.evaluation.as_mut() {
+                        ev.truth(ti, &tm.fault, tm.fault_active, tm.fault_observable);
+                    }
                     if tm.fault_active && !truth_active[ti] {
                         sinks.fault_onset(&tm.fault, t);
                     }
@@ -404,6 +409,31 @@ pub fn replay(
     cfg: &RuntimeConfig,
     opts: &ReplayOptions,
 ) -> Result<ReplaySummary, ReplayError> {
+    replay_with(log, cfg, opts, &mut None)
+}
+
+/// [`replay`], feeding an `fdd evaluate` collector with every step's diagnosis, the raised DTCs
+/// and the ground truth (the collector goes on across logs).
+pub fn replay_evaluating(
+    log: &Path,
+    cfg: &RuntimeConfig,
+    opts: &ReplayOptions,
+    evaluation: &mut Evaluation,
+) -> Result<ReplaySummary, ReplayError> {
+    let mut slot = Some(std::mem::take(evaluation));
+    let result = replay_with(log, cfg, opts, &mut slot);
+    if let Some(e) = slot {
+        *evaluation = e;
+    }
+    result
+}
+
+fn replay_with(
+    log: &Path,
+    cfg: &RuntimeConfig,
+    opts: &ReplayOptions,
+    evaluation: &mut Option<Evaluation>,
+) -> Result<ReplaySummary, ReplayError> {
     let started = Instant::now();
     let mut reader = LogReader::open(log)?;
     let file = reader.file().to_path_buf();
@@ -437,7 +467,7 @@ pub fn replay(
     // Innovations and test statistics only go to `--out`.
     let mut builder = Runtime::builder(cfg.clone())
         .only_monitors(&run_refs)
-        .detail_outputs(opts.out.is_some());
+        .detail_outputs(opts.out.is_some() || evaluation.is_some());
     if let Some(base) = &opts.memory {
         builder = builder.persistence(base);
     }
@@ -483,7 +513,15 @@ pub fn replay(
         None => None,
         Some(p) => Some(LogWriter::create_with(p, WriteOptions::default())?),
     };
-    let sinks = Sinks::new(events_file, out, &cfg.truth);
+    let mut sinks = Sinks::new(events_file, out, &cfg.truth);
+    sinks.classes = rt
+        .monitor_names()
+        .filter_map(|m| Some((m.to_string(), rt.fault_classes(m)?)))
+        .collect();
+    sinks.evaluation = evaluation.take();
+    if let Some(e) = sinks.evaluation.as_mut() {
+        e.begin_log(&rt, &cfg.truth);
+    }
 
     let mut r = Replayer {
         cfg,
@@ -541,6 +579,10 @@ pub fn replay(
         }
     };
     let wall_s = started.elapsed().as_secs_f64();
+    if let Some(mut e) = r.sinks.evaluation.take() {
+        e.end_log();
+        *evaluation = Some(e);
+    }
 
     if r.messages == 0 {
         if let Some(e) = fatal {

@@ -18,6 +18,7 @@ use fdd_monitor::monitor::Output;
 use serde::Serialize;
 
 use super::ReplayError;
+use crate::evaluate::Evaluation;
 use crate::stats::RunningStats;
 
 /// `/fdd/throttle/position`, borrowed (no allocation per message).
@@ -58,6 +59,15 @@ struct InnovationOut<'a> {
     dof: usize,
 }
 
+/// `/fdd/diagnosis`, borrowed.
+#[derive(Serialize)]
+struct DiagnosisOut<'a> {
+    monitor: &'a str,
+    flagged: bool,
+    classes: &'a [&'static str],
+    scores: &'a [f64],
+}
+
 /// `/fdd/tests`, borrowed.
 #[derive(Serialize)]
 struct TestOut<'a> {
@@ -87,6 +97,8 @@ pub const INTAKE_INNOVATION_TOPIC: &str = "/fdd/intake/innovation";
 pub const TESTS_TOPIC: &str = "/fdd/tests";
 pub const DTC_STATUS_TOPIC: &str = "/fdd/dtc_status";
 pub const EVENTS_TOPIC: &str = "/fdd/events";
+/// Each monitor step's diagnosis: the detection flag and the score per fault class.
+pub const DIAGNOSIS_TOPIC: &str = "/fdd/diagnosis";
 
 /// One event (DTC) of a monitor, as seen through its status changes.
 #[derive(Debug, Clone, PartialEq)]
@@ -157,6 +169,10 @@ pub struct Sinks {
     pub onsets: Vec<FaultOnset>,
     /// Outputs of kinds `--out` has no topic for (estimates of other names).
     pub unwritten: u64,
+    /// Each monitor's diagnosis classes (the names of its `scores`), for `--out`.
+    pub classes: Vec<(String, &'static [&'static str])>,
+    /// `fdd evaluate`'s collector, when evaluating.
+    pub evaluation: Option<Evaluation>,
 }
 
 impl Sinks {
@@ -183,13 +199,38 @@ impl Sinks {
                 .collect(),
             onsets: Vec::new(),
             unwritten: 0,
+            classes: Vec::new(),
+            evaluation: None,
         }
     }
 
-    /// Takes one monitor output of the step at `t_ns`.
-    pub fn on_output(&mut self, t_ns: u64, o: Output<'_>) {
+    /// Takes one output of `monitor`'s step at `t_ns`.
+    pub fn on_output(&mut self, t_ns: u64, monitor: &str, o: Output<'_>) {
         match o {
-            Output::Event(ev) => self.on_event(t_ns, ev),
+            Output::Event(ev) => {
+                if let Some(e) = self.evaluation.as_mut() {
+                    e.event(t_ns, monitor, ev);
+                }
+                self.on_event(t_ns, ev)
+            }
+            Output::Diagnosis { flagged, scores } => {
+                if let Some(e) = self.evaluation.as_mut() {
+                    e.diagnosis(t_ns, monitor, flagged, scores);
+                }
+                if self.out.is_some() {
+                    let classes = self
+                        .classes
+                        .iter()
+                        .find(|(m, _)| m == monitor)
+                        .map_or(&[][..], |(_, c)| *c);
+                    self.write_out(DIAGNOSIS_TOPIC, t_ns, || DiagnosisOut {
+                        monitor,
+                        flagged,
+                        classes,
+                        scores,
+                    });
+                }
+            }
             Output::Estimate {
                 name,
                 value,

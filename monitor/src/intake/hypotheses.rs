@@ -72,7 +72,8 @@ impl IntakeFault {
         }
     }
 
-    fn index(self) -> usize {
+    /// Position in [`ALL_FAULTS`] (the bank's order and the order of the diagnosis scores).
+    pub fn index(self) -> usize {
         match self {
             IntakeFault::MapSensor => 0,
             IntakeFault::MafSensor => 1,

@@ -96,6 +96,10 @@ pub const EVENT_NAMES: [&str; 9] = [
     "intake_leak",
 ];
 
+/// The fault classes of the monitor's diagnosis output: the isolation bank's hypotheses
+/// ([`IntakeFault::name`], in the order of [`ALL_FAULTS`]).
+pub const FAULT_CLASSES: [&str; 4] = ["map_sensor", "maf_sensor", "egr_valve", "manifold_leak"];
+
 /// What the monitor named this operation cycle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum IntakeDecision {
@@ -335,6 +339,8 @@ pub struct IntakeMonitor {
     decided: Option<IntakeDecision>,
     deciding: TestResult,
     candidates: [(&'static str, f64); 4],
+    /// The diagnosis scores of the latest segment (see [`Output::Diagnosis`]).
+    scores: [f64; 4],
     events: MonitorEvents,
 }
 
@@ -473,6 +479,7 @@ impl IntakeMonitor {
             decided: None,
             deciding: TestResult::NOT_TESTED,
             candidates: [("", 0.0); 4],
+            scores: [0.0; 4],
             events,
             inputs,
             model,
@@ -786,6 +793,61 @@ impl IntakeMonitor {
         if let Some(e) = est {
             e.emit(out);
         }
+        let flagged = self.diagnose(residual_alarm.is_some());
+        out(Output::Diagnosis {
+            flagged,
+            scores: &self.scores,
+        });
+    }
+
+    /// This segment's diagnosis scores (into `self.scores`); returns whether it is flagged.
+    /// Flagged while a fault is decided, an isolation episode is open, a residual test fails or
+    /// a circuit check fails. The scores are the decided fault's candidates; during an episode,
+    /// the hypotheses' GLR statistics normalized to sum to 1; for a circuit or frozen-reading
+    /// fault, all on the sensor.
+    fn diagnose(&mut self, residual_alarm: bool) -> bool {
+        self.scores = [0.0; 4];
+        let sensor = |event: usize| {
+            if event < 3 {
+                IntakeFault::MapSensor
+            } else {
+                IntakeFault::MafSensor
+            }
+        };
+        match self.decided {
+            Some(IntakeDecision::Residual { .. }) => {
+                for (name, score) in self.candidates {
+                    if let Some(i) = FAULT_CLASSES.iter().position(|c| *c == name) {
+                        self.scores[i] = score;
+                    }
+                }
+                return true;
+            }
+            Some(IntakeDecision::Circuit { event } | IntakeDecision::Frozen { event }) => {
+                self.scores[sensor(event).index()] = 1.0;
+                return true;
+            }
+            None => {}
+        }
+        if self.map_low_run > 0 || self.map_high_run > 0 {
+            self.scores[IntakeFault::MapSensor.index()] = 1.0;
+            return true;
+        }
+        if self.maf_low_run > 0 || self.maf_high_run > 0 {
+            self.scores[IntakeFault::MafSensor.index()] = 1.0;
+            return true;
+        }
+        if self.episode.is_some() {
+            let ranked = self.scan.ranked();
+            let total: f64 = ranked.iter().map(|f| f.glr.max(0.0)).sum();
+            if total > 0.0 {
+                for f in ranked {
+                    self.scores[f.fault.index()] = f.glr.max(0.0) / total;
+                }
+            }
+            return true;
+        }
+        residual_alarm
     }
 
     /// Steps the three filters and the residual tests; returns the first failing residual test
@@ -1264,6 +1326,10 @@ impl Monitor for IntakeMonitor {
 
     fn inputs(&self) -> &[SignalId] {
         &self.inputs
+    }
+
+    fn fault_classes(&self) -> &'static [&'static str] {
+        &FAULT_CLASSES
     }
 
     fn step(&mut self, now_ns: u64, signals: &SignalTable, out: &mut OutputSink<'_>) {

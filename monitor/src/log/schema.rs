@@ -460,13 +460,39 @@ pub const INTAKE_INNOVATION: TopicSchema = TopicSchema {
 /// The intake monitor's output topics (written by `fdd replay --out`).
 pub const INTAKE_OUTPUT_TOPICS: [&TopicSchema; 2] = [&INTAKE_ESTIMATE, &INTAKE_INNOVATION];
 
-/// The built-in topic named `topic` ([`TOPICS`], [`INTAKE_TOPICS`] or
-/// [`INTAKE_OUTPUT_TOPICS`]), if any.
+/// `/fdd/diagnosis`.
+pub const DIAGNOSIS: TopicSchema = TopicSchema {
+    topic: "/fdd/diagnosis",
+    schema_name: "fdd.Diagnosis",
+    description: "each monitor step's detection flag and score per fault class",
+    schema: r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "fdd.Diagnosis",
+  "description": "One monitor step's diagnosis: whether it flags its subsystem as faulty and how strongly it names each fault class (the per-sample output TDR, FAR and FIA are computed from). Log time = step time, ns.",
+  "type": "object",
+  "properties": {
+    "monitor": {"type": "string", "description": "the monitor (throttle, intake)"},
+    "flagged": {"type": "boolean", "description": "a test fails, a fault is being isolated, or a decided fault is present"},
+    "classes": {"type": "array", "items": {"type": "string"}, "description": "the monitor's fault classes, in the order of scores"},
+    "scores": {"type": "array", "items": {"type": "number", "minimum": 0, "maximum": 1}, "description": "score per class, 0..1 (all 0 when not flagged)"}
+  },
+  "required": ["monitor", "flagged", "classes", "scores"],
+  "additionalProperties": false
+}
+"#,
+};
+
+/// Output topics of every monitor (written by `fdd replay --out`).
+pub const MONITOR_OUTPUT_TOPICS: [&TopicSchema; 1] = [&DIAGNOSIS];
+
+/// The built-in topic named `topic` ([`TOPICS`], [`INTAKE_TOPICS`], [`INTAKE_OUTPUT_TOPICS`]
+/// or [`MONITOR_OUTPUT_TOPICS`]), if any.
 pub fn builtin_topic(topic: &str) -> Option<&'static TopicSchema> {
     TOPICS
         .iter()
         .chain(INTAKE_TOPICS.iter())
         .chain(INTAKE_OUTPUT_TOPICS.iter())
+        .chain(MONITOR_OUTPUT_TOPICS.iter())
         .copied()
         .find(|t| t.topic == topic)
 }

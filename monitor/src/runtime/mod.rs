@@ -196,7 +196,8 @@ impl RuntimeBuilder {
         self
     }
 
-    /// Whether the sink receives every step's innovations and test statistics (default true);
+    /// Whether the sink receives every step's innovations, test statistics and diagnoses
+    /// ([`crate::monitor::Output::Diagnosis`]; default true);
     /// without them it still gets events, status bytes and estimates, for less work per step.
     pub fn detail_outputs(mut self, on: bool) -> Self {
         self.detail = on;
@@ -606,6 +607,20 @@ impl Runtime {
     /// The monitors' names, in step order (the "no signal" monitor first).
     pub fn monitor_names(&self) -> impl Iterator<Item = &str> {
         self.names.iter().map(String::as_str)
+    }
+
+    /// The fault classes the monitor `name` scores in its [`crate::monitor::Output::Diagnosis`]
+    /// (empty for one that reports no diagnosis), or `None` for a name not in the runtime.
+    pub fn fault_classes(&self, name: &str) -> Option<&'static [&'static str]> {
+        let i = self.names.iter().position(|n| n == name)?;
+        Some(self.sched.monitor(i).fault_classes())
+    }
+
+    /// The estimates the monitor `name` outputs and offers to freeze frames (e.g.
+    /// `throttle_angle`), or `None` for a name not in the runtime.
+    pub fn estimate_names(&self, name: &str) -> Option<&[&'static str]> {
+        let i = self.names.iter().position(|n| n == name)?;
+        Some(self.sched.monitor(i).events().estimate_names())
     }
 
     /// Steps run per monitor: `(name, steps)`.

@@ -59,6 +59,15 @@ pub struct ThrottleMonitorConfig {
     pub motion_window_s: f64,
     pub static_tps_range_deg: f64,
     pub driven_range_deg: f64,
+    /// The plate is stuck when that holds for this long without a break (s): long enough for
+    /// a healthy plate leaving its closed stop to catch up with the static map (friction and
+    /// the return spring's preload hold it for a moment above the breakaway voltage).
+    pub plate_persist_s: f64,
+    /// A failed component whose tests pass again for this long is healthy again (s): its
+    /// DTC's testFailed bit clears and it is used again (a TPS fault that heals gives the
+    /// position output back to the TPS). Longer than the slowest test's detection delay, so
+    /// that a fault still present fails its test again before it could heal.
+    pub heal_s: f64,
     /// DTCs (J2012 code and failure type byte).
     pub dtc_tps_low: String,
     pub dtc_tps_high: String,
@@ -100,6 +109,8 @@ impl Default for ThrottleMonitorConfig {
             motion_window_s: 0.2,
             static_tps_range_deg: 1.0,
             driven_range_deg: 15.0,
+            plate_persist_s: 0.3,
+            heal_s: 5.0,
             dtc_tps_low: "P0122-16".into(),
             dtc_tps_high: "P0123-17".into(),
             dtc_tps_performance: "P0121-64".into(),

@@ -63,14 +63,19 @@ pub enum ThrottleFault {
 impl ThrottleFault {
     /// Name used as the isolation candidate in events.
     pub fn name(self) -> &'static str {
+        FAULT_CLASSES[self.class()]
+    }
+
+    /// Index into [`FAULT_CLASSES`] (the order of the diagnosis scores).
+    pub fn class(self) -> usize {
         match self {
-            ThrottleFault::TpsOpen => "tps_open_circuit",
-            ThrottleFault::TpsShort => "tps_short_circuit",
-            ThrottleFault::TpsIntermittent => "tps_intermittent",
-            ThrottleFault::TpsStuck => "tps_stuck",
-            ThrottleFault::TpsPerformance => "tps_range_performance",
-            ThrottleFault::PlateStuck => "plate_stuck",
-            ThrottleFault::Wattmeter => "wattmeter",
+            ThrottleFault::TpsOpen => 0,
+            ThrottleFault::TpsShort => 1,
+            ThrottleFault::TpsIntermittent => 2,
+            ThrottleFault::TpsStuck => 3,
+            ThrottleFault::TpsPerformance => 4,
+            ThrottleFault::PlateStuck => 5,
+            ThrottleFault::Wattmeter => 6,
         }
     }
 
@@ -90,6 +95,28 @@ impl ThrottleFault {
             ThrottleFault::Wattmeter => 5,
         }
     }
+}
+
+/// The fault classes of the monitor's diagnosis output ([`ThrottleFault::name`], in the order
+/// of [`ThrottleFault::class`]).
+pub const FAULT_CLASSES: [&str; 7] = [
+    "tps_open_circuit",
+    "tps_short_circuit",
+    "tps_intermittent",
+    "tps_stuck",
+    "tps_range_performance",
+    "plate_stuck",
+    "wattmeter",
+];
+
+/// A fault decided for one component, and the test result that qualified it (reported with
+/// its DTC's events).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decided {
+    pub fault: ThrottleFault,
+    pub result: TestResult,
+    /// When it was decided (s).
+    pub since_s: f64,
 }
 
 /// Event names, in the order of the DTC settings. The last one is the switch of the position
@@ -212,13 +239,22 @@ pub struct ThrottleMonitor {
     last_tps: f64,
     first_fail_s: Option<f64>,
     fired: [bool; 3],
-    decided: Option<ThrottleFault>,
-    /// The test result that qualified the fault (reported with its DTC's events).
-    deciding: TestResult,
     /// The first failing residual test's result, kept through the decision window.
     first_result: TestResult,
-    tps_failed: bool,
-    watt_failed: bool,
+    /// The fault decided per component (position sensor, wattmeter, plate): each removes from
+    /// use only what it makes untrustworthy, and each heals on its own.
+    tps_fault: Option<Decided>,
+    watt_fault: Option<Decided>,
+    plate_fault: Option<Decided>,
+    /// Steps in a row that a failed component's tests have passed (TPS, wattmeter, plate).
+    heal_run: [u32; 3],
+    /// Steps of passing that heal a failed component.
+    heal_steps: u32,
+    /// Steps in a row the plate has been static while driven, and how many make it stuck.
+    static_run: u32,
+    plate_persist: u32,
+    /// The diagnosis scores of the latest step (see [`Output::Diagnosis`]).
+    scores: [f64; 7],
     events: MonitorEvents,
 }
 
@@ -249,6 +285,8 @@ impl ThrottleMonitor {
             ("decision_window_s", cfg.decision_window_s),
             ("motion_window_s", cfg.motion_window_s),
             ("intermittent_window_s", cfg.intermittent_window_s),
+            ("heal_s", cfg.heal_s),
+            ("plate_persist_s", cfg.plate_persist_s),
         ] {
             if !(v > 0.0 && v.is_finite()) {
                 return Err(setting(key, format!("{v} must be a positive number")));
@@ -356,11 +394,15 @@ impl ThrottleMonitor {
             last_tps: f64::NAN,
             first_fail_s: None,
             fired: [false; 3],
-            decided: None,
-            deciding: TestResult::NOT_TESTED,
             first_result: TestResult::NOT_TESTED,
-            tps_failed: false,
-            watt_failed: false,
+            tps_fault: None,
+            watt_fault: None,
+            plate_fault: None,
+            heal_run: [0; 3],
+            heal_steps: ((cfg.heal_s / cfg.period_s).round() as u32).max(1),
+            static_run: 0,
+            plate_persist: ((cfg.plate_persist_s / cfg.period_s).round() as u32).max(1),
+            scores: [0.0; 7],
             events,
             inputs,
             model,
@@ -368,30 +410,39 @@ impl ThrottleMonitor {
         })
     }
 
-    /// The fault named this cycle, if any.
-    pub fn decided_fault(&self) -> Option<ThrottleFault> {
-        self.decided
+    /// The faults decided and not healed: position sensor, wattmeter, plate.
+    pub fn decided_faults(&self) -> impl Iterator<Item = ThrottleFault> + '_ {
+        [self.tps_fault, self.watt_fault, self.plate_fault]
+            .into_iter()
+            .flatten()
+            .map(|d| d.fault)
     }
 
-    /// True once the TPS is failed and the output comes from the wattmeter estimate.
+    /// True while the TPS is failed and the output comes from the wattmeter estimate.
     pub fn on_wattmeter_estimate(&self) -> bool {
-        self.tps_failed
+        self.tps_fault.is_some()
     }
 
+    /// Reports every event's result (a failed one with the fault as its isolation candidate).
     fn report_all(
         &mut self,
         now_s: f64,
-        verdicts: [Verdict; 7],
+        results: &[TestResult; 7],
         values: FreezeValues<'_>,
         out: &mut OutputSink<'_>,
     ) {
-        // A failed event carries the test result that qualified the fault and the candidate;
-        // other reports carry only their verdict (the tests' statistics are on their own
-        // outputs).
-        let candidate = self.decided.map(|f| [(f.name(), 1.0)]);
-        let candidates: &[(&str, f64)] = candidate.as_ref().map_or(&[], |c| c);
-        self.events
-            .report(now_s, &verdicts, &self.deciding, candidates, values, out);
+        for (i, r) in results.iter().enumerate() {
+            let fault = [self.tps_fault, self.watt_fault, self.plate_fault]
+                .into_iter()
+                .flatten()
+                .find(|d| d.fault.event() == i || (i == SWITCH_EVENT && d.fault.is_tps()));
+            let candidate = fault.map(|d| [(d.fault.name(), 1.0)]);
+            let candidates: &[(&str, f64)] = match (&candidate, r.verdict) {
+                (Some(c), Verdict::Failed) => c,
+                _ => &[],
+            };
+            self.events.report_one(i, now_s, r, candidates, values, out);
+        }
     }
 
     /// Restarts the fault decision and the filters, as at the start of an operation cycle
@@ -399,11 +450,12 @@ impl ThrottleMonitor {
     fn restart(&mut self) {
         self.tps_ukf = self.tps_ukf_init.clone();
         self.both_ukf = self.both_ukf_init.clone();
-        self.decided = None;
-        self.deciding = TestResult::NOT_TESTED;
         self.first_result = TestResult::NOT_TESTED;
-        self.tps_failed = false;
-        self.watt_failed = false;
+        self.tps_fault = None;
+        self.watt_fault = None;
+        self.plate_fault = None;
+        self.heal_run = [0; 3];
+        self.static_run = 0;
         self.first_fail_s = None;
         self.fired = [false; 3];
         self.nis_ring.clear();
@@ -413,26 +465,208 @@ impl ThrottleMonitor {
         self.rail_high_run = 0;
     }
 
-    fn classify(&self) -> ThrottleFault {
-        if self.frozen_run >= self.cfg.frozen_samples {
-            return ThrottleFault::TpsStuck;
-        }
+    /// The TPS has not moved by `static_tps_range_deg` over the motion window while the
+    /// applied voltage should have moved the plate: its static map spanned more than
+    /// `driven_range_deg`, or holds the plate that far from the TPS angle.
+    fn static_while_driven(&self) -> bool {
         let static_tps =
             self.tps_hist.full() && self.tps_hist.span() < self.cfg.static_tps_range_deg;
-        // The voltage moved the static map, or holds the plate's rest angle far from the TPS.
         let away = match (self.eq_hist.last(), self.tps_hist.last()) {
             (Some(eq), Some(tps)) => (eq - tps).abs() > self.cfg.driven_range_deg,
             _ => false,
         };
         let driven =
             (self.eq_hist.full() && self.eq_hist.span() > self.cfg.driven_range_deg) || away;
-        if static_tps && driven {
-            return ThrottleFault::PlateStuck;
+        static_tps && driven
+    }
+
+    /// Names the fault behind the residual tests that fired in this episode, among the
+    /// components not already failed; `None` when none of them explains it.
+    fn classify(&self) -> Option<ThrottleFault> {
+        let tps_testable = self.tps_fault.is_none();
+        if tps_testable && self.frozen_run >= self.cfg.frozen_samples {
+            return Some(ThrottleFault::TpsStuck);
         }
-        if self.fired[2] && !self.fired[0] && !self.fired[1] {
-            return ThrottleFault::Wattmeter;
+        if tps_testable && self.plate_fault.is_none() && self.static_while_driven() {
+            return Some(ThrottleFault::PlateStuck);
         }
-        ThrottleFault::TpsPerformance
+        let tps_fired = self.fired[0] || self.fired[1];
+        if self.fired[2] && !tps_fired && self.watt_fault.is_none() {
+            return Some(ThrottleFault::Wattmeter);
+        }
+        if tps_fired && tps_testable && self.plate_fault.is_none() {
+            return Some(ThrottleFault::TpsPerformance);
+        }
+        None
+    }
+
+    /// Sets the component of `fault` failed, and restarts the tests that will see it heal.
+    fn set_failed(&mut self, fault: ThrottleFault, result: TestResult, now_s: f64) {
+        let d = Some(Decided {
+            fault,
+            result,
+            since_s: now_s,
+        });
+        match fault {
+            ThrottleFault::Wattmeter => {
+                self.watt_fault = d;
+                self.heal_run[1] = 0;
+            }
+            ThrottleFault::PlateStuck => {
+                self.plate_fault = d;
+                self.heal_run[2] = 0;
+            }
+            _ => {
+                tracing::debug!(
+                    time_s = now_s,
+                    fault = fault.name(),
+                    "TPS failed: position from the wattmeter estimate"
+                );
+                self.tps_fault = d;
+                self.heal_run[0] = 0;
+            }
+        }
+    }
+
+    /// The decision of one step: new faults, then healing.
+    fn decide(&mut self, now_s: f64, tps: Option<f64>, results: &[TestResult; 3]) {
+        let rail = |run: u32, persist: u32, period_s: f64| TestResult {
+            value: f64::from(run) * period_s,
+            min: 0.0,
+            max: f64::from(persist - 1) * period_s,
+            verdict: Verdict::Failed,
+        };
+        let intermittent =
+            self.dropouts.full() && self.dropouts.span() <= self.cfg.intermittent_window_s;
+        let p = self.cfg.period_s;
+        // Circuit faults of the TPS: a rail the model rules out, persisting, or repeated
+        // dropouts.
+        if self.tps_fault.is_none() {
+            if self.rail_low_run >= self.rail_persist {
+                let r = rail(self.rail_low_run, self.rail_persist, p);
+                self.set_failed(ThrottleFault::TpsOpen, r, now_s);
+            } else if self.rail_high_run >= self.rail_persist {
+                let r = rail(self.rail_high_run, self.rail_persist, p);
+                self.set_failed(ThrottleFault::TpsShort, r, now_s);
+            } else if intermittent {
+                let count = self.cfg.intermittent_count as f64;
+                let r = TestResult {
+                    value: count,
+                    min: 0.0,
+                    max: count - 1.0,
+                    verdict: Verdict::Failed,
+                };
+                self.set_failed(ThrottleFault::TpsIntermittent, r, now_s);
+            }
+        }
+        // The stuck-plate test runs on its own (a trusted TPS that does not move while the
+        // voltage should move the plate, and is not frozen: that would be the sensor).
+        let static_now = self.tps_fault.is_none()
+            && self.plate_fault.is_none()
+            && self.frozen_run < self.cfg.frozen_samples
+            && self.static_while_driven();
+        self.static_run = if static_now { self.static_run + 1 } else { 0 };
+        if self.static_run >= self.plate_persist {
+            self.static_run = 0;
+            tracing::debug!(
+                time_s = now_s,
+                tps_span = self.tps_hist.span(),
+                eq_span = self.eq_hist.span(),
+                eq = self.eq_hist.last(),
+                tps = self.tps_hist.last(),
+                u_slow = self.u_slow,
+                "plate stuck"
+            );
+            let r = TestResult {
+                value: self.tps_hist.span(),
+                min: self.cfg.static_tps_range_deg,
+                max: f64::INFINITY,
+                verdict: Verdict::Failed,
+            };
+            self.set_failed(ThrottleFault::PlateStuck, r, now_s);
+            self.first_fail_s = None;
+            self.fired = [false; 3];
+        }
+        // Residual episode: the tests of the components that are not failed open it; after
+        // the decision window the fault is named.
+        let tps_testable = self.tps_fault.is_none() && self.plate_fault.is_none();
+        // The wattmeter is tested against the model and a trusted TPS: with the TPS failed or
+        // the plate stuck, the filters' current estimate is not independent of it.
+        let eligible = [
+            tps_testable,
+            tps_testable,
+            tps_testable && self.watt_fault.is_none(),
+        ];
+        for (i, r) in results.iter().enumerate() {
+            if eligible[i] && r.verdict == Verdict::Failed {
+                self.fired[i] = true;
+                if self.first_fail_s.is_none() {
+                    self.first_fail_s = Some(now_s);
+                    self.first_result = *r;
+                }
+            }
+        }
+        if let Some(t0) = self.first_fail_s {
+            if now_s - t0 >= self.cfg.decision_window_s {
+                if let Some(f) = self.classify() {
+                    self.set_failed(f, self.first_result, now_s);
+                }
+                self.first_fail_s = None;
+                self.fired = [false; 3];
+            }
+        }
+        // Healing: a failed component whose tests pass for `heal_s` is healthy again (its
+        // DTC's testFailed clears; pending and confirmed follow the event memory's rules).
+        let quiet = |r: &TestResult| matches!(r.verdict, Verdict::Passed | Verdict::PrePassed);
+        if let Some(d) = self.tps_fault {
+            let ok = match d.fault {
+                ThrottleFault::TpsOpen | ThrottleFault::TpsShort => {
+                    tps.is_some() && self.rail_low_run == 0 && self.rail_high_run == 0
+                }
+                ThrottleFault::TpsIntermittent => {
+                    tps.is_some()
+                        && self.rail_low_run == 0
+                        && self.rail_high_run == 0
+                        && self
+                            .dropouts
+                            .last()
+                            .is_none_or(|t| now_s - t > self.cfg.intermittent_window_s)
+                }
+                _ => {
+                    self.frozen_run < self.cfg.frozen_samples
+                        && quiet(&results[0])
+                        && quiet(&results[1])
+                }
+            };
+            self.heal_run[0] = if ok { self.heal_run[0] + 1 } else { 0 };
+            if self.heal_run[0] >= self.heal_steps {
+                tracing::debug!(time_s = now_s, fault = d.fault.name(), "TPS healed");
+                self.tps_fault = None;
+                self.dropouts.clear();
+                // The combined filter takes the TPS again from the TPS filter's estimate.
+                let _ = self
+                    .both_ukf
+                    .reset(*self.tps_ukf.state(), *self.tps_ukf.covariance());
+            }
+        }
+        if self.watt_fault.is_some() && tps_testable {
+            self.heal_run[1] = if quiet(&results[2]) {
+                self.heal_run[1] + 1
+            } else {
+                0
+            };
+            if self.heal_run[1] >= self.heal_steps {
+                self.watt_fault = None;
+            }
+        }
+        if self.plate_fault.is_some() {
+            let moving =
+                self.tps_hist.full() && self.tps_hist.span() >= self.cfg.static_tps_range_deg;
+            self.heal_run[2] = if moving { self.heal_run[2] + 1 } else { 0 };
+            if self.heal_run[2] >= self.heal_steps.min(self.tps_hist.cap as u32) {
+                self.plate_fault = None;
+            }
+        }
     }
 }
 
@@ -447,6 +681,10 @@ impl Monitor for ThrottleMonitor {
 
     fn inputs(&self) -> &[SignalId] {
         &self.inputs
+    }
+
+    fn fault_classes(&self) -> &'static [&'static str] {
+        &FAULT_CLASSES
     }
 
     fn step(&mut self, now_ns: u64, signals: &SignalTable, out: &mut OutputSink<'_>) {
@@ -496,8 +734,9 @@ impl Monitor for ThrottleMonitor {
             }
         }
 
-        // Filters.
-        let tps_usable = tps.is_some() && !rail_low && !rail_high && !self.tps_failed;
+        // Filters. The TPS filter keeps running on a failed TPS (not on its rail readings), so
+        // that its tests can see the sensor heal; the combined filter uses only what is trusted.
+        let tps_usable = tps.is_some() && !rail_low && !rail_high;
         let mut nis_t = f64::NAN;
         let mut z_t = f64::NAN;
         if let (true, Some(v)) = (tps_usable, tps) {
@@ -513,9 +752,18 @@ impl Monitor for ThrottleMonitor {
                 });
             }
         }
-        let use_tps = tps_usable && nis_t.is_finite() && nis_t < self.cfg.tps_gate_nis;
-        let use_watt = watt.is_some() && !self.watt_failed;
+        let tps_trusted = self.tps_fault.is_none();
+        let use_tps =
+            tps_trusted && tps_usable && nis_t.is_finite() && nis_t < self.cfg.tps_gate_nis;
+        let use_watt = watt.is_some() && self.watt_fault.is_none();
         let mut z_w = f64::NAN;
+        if let (false, Some(w)) = (use_watt, watt) {
+            // A failed wattmeter is still compared with the combined filter's prediction of
+            // `i^2` (Gaussian moments: mean mu^2 + P, variance 4 mu^2 P + 2 P^2, plus R).
+            let (mu, p) = (self.both_ukf.state()[2], self.both_ukf.covariance()[(2, 2)]);
+            let var = 4.0 * mu * mu * p + 2.0 * p * p + self.both_ukf.measurement_noise()[(1, 1)];
+            z_w = (w - (mu * mu + p)) / var.max(f64::MIN_POSITIVE).sqrt();
+        }
         if use_tps || use_watt {
             let y = Vector2::new(tps.unwrap_or(0.0), watt.unwrap_or(0.0));
             if let Ok(inn) = self.both_ukf.update_subset(&y, &uu, &[use_tps, use_watt]) {
@@ -571,93 +819,56 @@ impl Monitor for ThrottleMonitor {
             result: cusum_watt,
         });
 
-        // Decision.
         let results = [nis_result, cusum_tps, cusum_watt];
-        let mut newly = None;
-        if self.decided.is_none() {
-            let intermittent =
-                self.dropouts.full() && self.dropouts.span() <= self.cfg.intermittent_window_s;
-            // Rail time against the longest episode that is still a dropout (s).
-            let rail = |run: u32| TestResult {
-                value: f64::from(run) * self.cfg.period_s,
-                min: 0.0,
-                max: f64::from(self.rail_persist - 1) * self.cfg.period_s,
-                verdict: Verdict::Failed,
-            };
-            if self.rail_low_run >= self.rail_persist {
-                newly = Some((ThrottleFault::TpsOpen, rail(self.rail_low_run)));
-            } else if self.rail_high_run >= self.rail_persist {
-                newly = Some((ThrottleFault::TpsShort, rail(self.rail_high_run)));
-            } else if intermittent {
-                let count = self.cfg.intermittent_count as f64;
-                let dropouts = TestResult {
-                    value: count,
-                    min: 0.0,
-                    max: count - 1.0,
-                    verdict: Verdict::Failed,
-                };
-                newly = Some((ThrottleFault::TpsIntermittent, dropouts));
-            } else {
-                for (i, r) in results.iter().enumerate() {
-                    if r.verdict == Verdict::Failed {
-                        self.fired[i] = true;
-                        if self.first_fail_s.is_none() {
-                            self.first_fail_s = Some(now_s);
-                            self.first_result = *r;
-                        }
-                    }
+        self.decide(now_s, tps, &results);
+
+        // Events: a failed component's event fails with the result that qualified it; the
+        // other events of a component pass while nothing is pending, and are not tested while
+        // a fault is being isolated or while what would test them is failed.
+        let pending =
+            self.first_fail_s.is_some() || self.rail_low_run > 0 || self.rail_high_run > 0;
+        let mut results7 = [TestResult::NOT_TESTED; 7];
+        let pass = |on: bool| {
+            let mut r = TestResult::NOT_TESTED;
+            if on {
+                r.verdict = Verdict::Passed;
+            }
+            r
+        };
+        match self.tps_fault {
+            Some(d) => results7[d.fault.event()] = d.result,
+            None => {
+                for r in &mut results7[..4] {
+                    *r = pass(!pending);
                 }
-                if let Some(t0) = self.first_fail_s {
-                    if now_s - t0 >= self.cfg.decision_window_s {
-                        newly = Some((self.classify(), self.first_result));
-                    }
+                // A stuck plate makes the TPS filter's residuals the plate's, not the sensor's.
+                if self.plate_fault.is_some() {
+                    results7[ThrottleFault::TpsPerformance.event()] = TestResult::NOT_TESTED;
                 }
             }
         }
-        let newly = newly.map(|(f, r)| {
-            self.deciding = r;
-            f
-        });
-        if let Some(f) = newly {
-            self.decided = Some(f);
-            if f.is_tps() {
-                self.tps_failed = true;
-                tracing::debug!(
-                    time_s = now_s,
-                    fault = f.name(),
-                    "TPS failed: position from the wattmeter estimate"
-                );
-            }
-            if f == ThrottleFault::Wattmeter {
-                self.watt_failed = true;
-            }
-        }
-        let mut event_verdicts = [Verdict::NotTested; 7];
-        match self.decided {
-            Some(f) => {
-                event_verdicts[f.event()] = Verdict::Failed;
-                event_verdicts[SWITCH_EVENT] = if self.tps_failed {
-                    Verdict::Failed
-                } else {
-                    Verdict::Passed
-                };
-            }
-            None if self.first_fail_s.is_none()
-                && self.rail_low_run == 0
-                && self.rail_high_run == 0 =>
-            {
-                event_verdicts = [Verdict::Passed; 7];
-            }
-            None => {}
-        }
-        // Position output: fused with the TPS while it is trusted, the wattmeter estimate after.
+        results7[ThrottleFault::PlateStuck.event()] = match self.plate_fault {
+            Some(d) => d.result,
+            None => pass(!pending && self.tps_fault.is_none()),
+        };
+        results7[ThrottleFault::Wattmeter.event()] = match self.watt_fault {
+            Some(d) => d.result,
+            None => pass(!pending && self.tps_fault.is_none() && self.plate_fault.is_none()),
+        };
+        results7[SWITCH_EVENT] = match self.tps_fault {
+            Some(d) => d.result,
+            None => pass(true),
+        };
+
+        // Position output: fused with the TPS while it is trusted, the wattmeter estimate
+        // after (the model alone when the wattmeter is failed too).
         let x = *self.both_ukf.state();
         let angle = self.model.angle_deg(&x);
         let values = FreezeValues {
             signals: Some(signals),
             estimates: &[angle],
         };
-        self.report_all(now_s, event_verdicts, values, out);
+        self.report_all(now_s, &results7, values, out);
         let half = 1.96 * self.both_ukf.covariance()[(0, 0)].max(0.0).sqrt()
             / self.model.params().angle_scale;
         out(Output::Estimate {
@@ -665,11 +876,41 @@ impl Monitor for ThrottleMonitor {
             value: angle,
             lower: (angle - half).max(limits[0]),
             upper: (angle + half).min(limits[1]),
-            source: if self.tps_failed {
-                "wattmeter_estimate"
-            } else {
-                "tps"
+            source: match (self.tps_fault, self.watt_fault) {
+                (None, _) => "tps",
+                (Some(_), None) => "wattmeter_estimate",
+                (Some(_), Some(_)) => "model_estimate",
             },
+        });
+
+        // Diagnosis: flagged while a fault is decided, a residual test has failed and the
+        // decision window runs, or the TPS reads a rail the model calls implausible. Each
+        // decided fault scores 1; while pending, so does what the evidence so far points at.
+        self.scores = [0.0; 7];
+        let mut flagged = false;
+        for d in [self.tps_fault, self.watt_fault, self.plate_fault]
+            .into_iter()
+            .flatten()
+        {
+            self.scores[d.fault.class()] = 1.0;
+            flagged = true;
+        }
+        let provisional = if self.tps_fault.is_none() && self.rail_low_run > 0 {
+            Some(ThrottleFault::TpsOpen)
+        } else if self.tps_fault.is_none() && self.rail_high_run > 0 {
+            Some(ThrottleFault::TpsShort)
+        } else if self.first_fail_s.is_some() {
+            self.classify()
+        } else {
+            None
+        };
+        if let Some(f) = provisional {
+            self.scores[f.class()] = 1.0;
+            flagged = true;
+        }
+        out(Output::Diagnosis {
+            flagged,
+            scores: &self.scores,
         });
 
         let _ = self.tps_ukf.predict(&uu);

@@ -1,0 +1,203 @@
+//! The evaluation's view of a replay: per monitor step, the monitor's diagnosis
+//! ([`Output::Diagnosis`]) against the ground truth of the log at that time; per raised DTC,
+//! whether it names the fault present. Fed by the replay's sink ([`crate::replay`]) and kept
+//! across logs, so that one [`Evaluator`] per monitor sees every log.
+
+use std::collections::BTreeMap;
+
+use fdd_diagnostics::evaluation::{DtcKind, EvaluationReport, Evaluator, Truth};
+use fdd_diagnostics::event::EventView;
+use fdd_monitor::runtime::config::TruthConfig;
+use fdd_monitor::runtime::Runtime;
+
+use super::fault_types::{fault_types, FaultType};
+
+/// The latest ground truth of one truth topic.
+#[derive(Debug, Clone, Default)]
+struct TruthState {
+    /// A truth message has been seen in this log.
+    seen: bool,
+    active: bool,
+    observable: bool,
+    fault: String,
+}
+
+/// One monitor's evaluation.
+#[derive(Debug, Clone)]
+struct MonitorEvaluation {
+    monitor: String,
+    /// Index of its truth topic in the configuration's `[[truth]]` (the one whose estimate the
+    /// monitor outputs), in the current log.
+    truth: Option<usize>,
+    types: &'static [FaultType],
+    /// Per fault type, the indices of the monitor's diagnosis classes scored as it.
+    scored_as: Vec<Vec<usize>>,
+    evaluator: Evaluator,
+}
+
+/// Evaluation state kept across the logs of one `fdd evaluate`.
+#[derive(Debug, Clone, Default)]
+pub struct Evaluation {
+    monitors: Vec<MonitorEvaluation>,
+    truths: Vec<TruthState>,
+    scores: Vec<f64>,
+    classes: Vec<usize>,
+    /// Truth fault names that are not in the fault-type table, with the samples they made
+    /// uncounted.
+    pub unknown_faults: BTreeMap<String, u64>,
+    /// Samples or DTCs the evaluator refused (a monitor's score outside [0, 1], time going
+    /// backwards), with the first message.
+    pub refused: u64,
+    pub first_refusal: Option<String>,
+}
+
+impl Evaluation {
+    /// A new log replayed by `rt`, with the configuration's truth topics.
+    pub fn begin_log(&mut self, rt: &Runtime, truths: &[TruthConfig]) {
+        self.truths = vec![TruthState::default(); truths.len()];
+        for m in &mut self.monitors {
+            m.truth = None;
+        }
+        let names: Vec<String> = rt.monitor_names().map(str::to_string).collect();
+        for name in names {
+            let types = fault_types(&name);
+            let classes = rt.fault_classes(&name).unwrap_or(&[]);
+            if types.is_empty() || classes.is_empty() {
+                continue;
+            }
+            let estimates = rt.estimate_names(&name).unwrap_or(&[]);
+            let truth = truths
+                .iter()
+                .position(|t| estimates.contains(&t.estimate.as_str()));
+            let i = match self.monitors.iter().position(|m| m.monitor == name) {
+                Some(i) => i,
+                None => {
+                    let truth_names: Vec<&str> = types.iter().map(|t| t.truth).collect();
+                    self.monitors.push(MonitorEvaluation {
+                        scored_as: types
+                            .iter()
+                            .map(|t| {
+                                t.scored_as
+                                    .iter()
+                                    .filter_map(|c| classes.iter().position(|k| k == c))
+                                    .collect()
+                            })
+                            .collect(),
+                        monitor: name,
+                        truth: None,
+                        types,
+                        evaluator: Evaluator::new(&truth_names),
+                    });
+                    self.monitors.len() - 1
+                }
+            };
+            let m = &mut self.monitors[i];
+            m.truth = truth;
+            m.evaluator.start_log();
+        }
+    }
+
+    /// The log ended.
+    pub fn end_log(&mut self) {
+        for m in &mut self.monitors {
+            m.evaluator.end_log();
+        }
+    }
+
+    /// A truth message of the configuration's truth topic `index`. `observable` is the truth's
+    /// `fault_observable` (absent: as `active`).
+    pub fn truth(&mut self, index: usize, fault: &str, active: bool, observable: Option<bool>) {
+        if let Some(s) = self.truths.get_mut(index) {
+            s.seen = true;
+            s.active = active;
+            s.observable = active && observable.unwrap_or(true);
+            if s.fault != fault {
+                s.fault.clear();
+                s.fault.push_str(fault);
+            }
+        }
+    }
+
+    /// The diagnosis of `monitor`'s step at `t_ns`.
+    pub fn diagnosis(&mut self, t_ns: u64, monitor: &str, flagged: bool, scores: &[f64]) {
+        let Some(m) = self.monitors.iter_mut().find(|m| m.monitor == monitor) else {
+            return;
+        };
+        let Some(state) = m.truth.and_then(|i| self.truths.get(i)) else {
+            return;
+        };
+        if !state.seen {
+            return;
+        }
+        let truth = if !state.active {
+            Truth::FaultFree
+        } else {
+            // Two faults at once are written `a+b`: the sample counts for the first one the
+            // table knows.
+            match state
+                .fault
+                .split('+')
+                .find_map(|f| m.types.iter().position(|t| t.truth == f))
+            {
+                Some(i) if state.observable => Truth::Faulty(i),
+                Some(_) => Truth::Ignored,
+                None => {
+                    *self.unknown_faults.entry(state.fault.clone()).or_insert(0) += 1;
+                    Truth::Ignored
+                }
+            }
+        };
+        self.scores.clear();
+        for classes in &m.scored_as {
+            let s: f64 = classes
+                .iter()
+                .filter_map(|&c| scores.get(c))
+                .filter(|v| v.is_finite())
+                .sum();
+            self.scores.push(s.clamp(0.0, 1.0));
+        }
+        if let Err(e) = m
+            .evaluator
+            .sample(t_ns as f64 * 1e-9, truth, flagged, &self.scores)
+        {
+            self.refused += 1;
+            self.first_refusal
+                .get_or_insert_with(|| format!("monitor `{monitor}`: {e}"));
+        }
+    }
+
+    /// A status change of one of `monitor`'s events at `t_ns`; a raised DTC (testFailed 0 -> 1)
+    /// is judged against the truth.
+    pub fn event(&mut self, t_ns: u64, monitor: &str, ev: &EventView<'_>) {
+        if !ev.raised() {
+            return;
+        }
+        let Some(m) = self.monitors.iter_mut().find(|m| m.monitor == monitor) else {
+            return;
+        };
+        self.classes.clear();
+        self.classes.extend(
+            m.types
+                .iter()
+                .enumerate()
+                .filter(|(_, t)| t.dtcs.contains(&ev.event))
+                .map(|(i, _)| i),
+        );
+        if let Err(e) = m
+            .evaluator
+            .dtc(t_ns as f64 * 1e-9, &self.classes, DtcKind::Specific)
+        {
+            self.refused += 1;
+            self.first_refusal
+                .get_or_insert_with(|| format!("monitor `{monitor}`: {e}"));
+        }
+    }
+
+    /// Each evaluated monitor's figures, in the order first seen.
+    pub fn reports(&mut self) -> Vec<(String, EvaluationReport)> {
+        self.monitors
+            .iter_mut()
+            .map(|m| (m.monitor.clone(), m.evaluator.report()))
+            .collect()
+    }
+}
