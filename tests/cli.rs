@@ -174,5 +174,8 @@ fn evaluate_scores_logs_and_scenarios_against_their_truth() {
         .expect("run");
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("README.md") && err.contains("neither"), "{err}");
+    assert!(
+        err.contains("README.md") && err.contains("neither"),
+        "{err}"
+    );
 }

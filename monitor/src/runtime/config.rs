@@ -133,15 +133,16 @@ pub struct MonitorsConfig {
     /// The electronic-throttle monitor.
     #[serde(default)]
     pub throttle: bool,
-    /// Throttle model and monitor settings (a `config/throttle.toml`-shaped file); absent: the
+    /// Throttle model and monitor settings (a `config/throttle.toml`-shaped file; a relative
+    /// path is relative to the directory of the configuration file naming it); absent: the
     /// embedded default.
     #[serde(default)]
     pub throttle_config: Option<std::path::PathBuf>,
     /// The intake-manifold monitor.
     #[serde(default)]
     pub intake: bool,
-    /// Intake model and monitor settings (a `config/intake.toml`-shaped file); absent: the
-    /// embedded default.
+    /// Intake model and monitor settings (a `config/intake.toml`-shaped file; relative paths as
+    /// for `throttle_config`); absent: the embedded default.
     #[serde(default)]
     pub intake_config: Option<std::path::PathBuf>,
 }
@@ -251,7 +252,22 @@ impl RuntimeConfig {
     pub fn load(path: Option<&Path>) -> Result<Self, ConfigError> {
         let (text, origin) =
             crate::config::read_or_embedded(path, DEFAULT_RUNTIME_TOML, "config/fdd.toml")?;
-        let cfg = Self::parse(&text, &origin)?;
+        let mut cfg = Self::parse(&text, &origin)?;
+        // A monitor settings file named relative to a configuration file is beside it (so a
+        // directory written by `fdd calibrate` works from anywhere).
+        if let Some(dir) = path.and_then(Path::parent) {
+            for p in [
+                &mut cfg.monitors.throttle_config,
+                &mut cfg.monitors.intake_config,
+            ]
+            .into_iter()
+            .flatten()
+            {
+                if p.is_relative() {
+                    *p = dir.join(&*p);
+                }
+            }
+        }
         tracing::info!(
             config = %cfg.origin,
             signals = cfg.signals.len(),

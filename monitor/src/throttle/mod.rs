@@ -36,7 +36,7 @@ use fdd_diagnostics::detectors::{two_sided_arl, Cusum, CusumConfig};
 use fdd_diagnostics::{TestResult, Verdict};
 use fdd_estimators::models::throttle::{PositionAndWattmeter, PositionSensor, ThrottleModel};
 use fdd_estimators::reacquire::Reacquire;
-use fdd_estimators::{SigmaPoints, Ukf};
+use fdd_estimators::{NoiseLevel, SigmaPoints, Ukf};
 use nalgebra::{Matrix1, Matrix2, Matrix3, Vector1, Vector2, Vector3};
 
 pub use config::ThrottleMonitorConfig;
@@ -47,6 +47,8 @@ use crate::signal_table::{SignalId, SignalTable};
 
 /// Capacity of the fixed rings (NIS window, motion window, dropout times).
 const RING: usize = 512;
+/// Steps between updates of the filters' `R` from the noise estimates.
+const NOISE_UPDATE_STEPS: u32 = 64;
 
 /// The faults the monitor names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -250,6 +252,11 @@ pub struct ThrottleMonitor {
     heal_run: [u32; 3],
     /// Steps of passing that heal a failed component.
     heal_steps: u32,
+    /// Online estimates of the TPS and wattmeter noise variances (V^2, W^2), fed while nothing
+    /// is failing, and the steps since they were last put into the filters.
+    tps_noise: NoiseLevel,
+    watt_noise: NoiseLevel,
+    noise_steps: u32,
     /// Steps in a row the plate has been static while driven, and how many make it stuck.
     static_run: u32,
     plate_persist: u32,
@@ -286,6 +293,8 @@ impl ThrottleMonitor {
             ("motion_window_s", cfg.motion_window_s),
             ("intermittent_window_s", cfg.intermittent_window_s),
             ("heal_s", cfg.heal_s),
+            ("noise_time_constant_s", cfg.noise_time_constant_s),
+            ("fallback_r_scale", cfg.fallback_r_scale),
             ("plate_persist_s", cfg.plate_persist_s),
         ] {
             if !(v > 0.0 && v.is_finite()) {
@@ -315,6 +324,37 @@ impl ThrottleMonitor {
         let q = Matrix3::from_diagonal(&Vector3::new(3.15e-4, 1e-2, 1.62e-4));
         let rt = cfg.tps_noise_v * cfg.tps_noise_v;
         let rw = cfg.wattmeter_noise_w * cfg.wattmeter_noise_w + cfg.wattmeter_r_floor;
+        let time_constant = (cfg.noise_time_constant_s / cfg.period_s).max(1.0);
+        let settle = (cfg.noise_settle_s / cfg.period_s).round() as u64;
+        let bounds = |key: &'static str, prior_std: f64, min_std: f64, max_std: f64| {
+            NoiseLevel::new(
+                prior_std * prior_std,
+                min_std * min_std,
+                max_std * max_std,
+                time_constant,
+                settle,
+            )
+            .ok_or_else(|| {
+                setting(
+                    key,
+                    format!(
+                        "the noise range [{min_std}, {max_std}] must be positive and contain the configured level"
+                    ),
+                )
+            })
+        };
+        let tps_noise = bounds(
+            "tps_noise_max_v",
+            cfg.tps_noise_v,
+            cfg.tps_noise_min_v,
+            cfg.tps_noise_max_v,
+        )?;
+        let watt_noise = bounds(
+            "wattmeter_noise_max_w",
+            cfg.wattmeter_noise_w,
+            cfg.wattmeter_noise_min_w,
+            cfg.wattmeter_noise_max_w,
+        )?;
         let tps_ukf = Ukf::new(
             model,
             tps,
@@ -400,6 +440,9 @@ impl ThrottleMonitor {
             plate_fault: None,
             heal_run: [0; 3],
             heal_steps: ((cfg.heal_s / cfg.period_s).round() as u32).max(1),
+            tps_noise,
+            watt_noise,
+            noise_steps: 0,
             static_run: 0,
             plate_persist: ((cfg.plate_persist_s / cfg.period_s).round() as u32).max(1),
             scores: [0.0; 7],
@@ -456,6 +499,9 @@ impl ThrottleMonitor {
         self.plate_fault = None;
         self.heal_run = [0; 3];
         self.static_run = 0;
+        self.tps_noise.reset();
+        self.watt_noise.reset();
+        self.noise_steps = 0;
         self.first_fail_s = None;
         self.fired = [false; 3];
         self.nis_ring.clear();
@@ -463,6 +509,36 @@ impl ThrottleMonitor {
         self.dropouts.clear();
         self.rail_low_run = 0;
         self.rail_high_run = 0;
+    }
+
+    /// Puts the noise estimates into the filters' `R` every [`NOISE_UPDATE_STEPS`] steps once
+    /// settled (a new `R` is checked for definiteness: not worth doing every step).
+    fn apply_noise_levels(&mut self) {
+        self.noise_steps += 1;
+        if self.noise_steps < NOISE_UPDATE_STEPS {
+            return;
+        }
+        self.noise_steps = 0;
+        let rt = self.tps_noise.variance();
+        let scale = if self.tps_fault.is_some() {
+            self.cfg.fallback_r_scale
+        } else {
+            1.0
+        };
+        let rw = scale * self.watt_noise.variance() + self.cfg.wattmeter_r_floor;
+        let _ = self.tps_ukf.set_measurement_noise(Matrix1::new(rt));
+        let _ = self
+            .both_ukf
+            .set_measurement_noise(Matrix2::new(rt, 0.0, 0.0, rw));
+    }
+
+    /// The estimated noise levels (standard deviations): TPS (V) and wattmeter (W, without the
+    /// `wattmeter_r_floor`), as the filters use them now.
+    pub fn noise_levels(&self) -> (f64, f64) {
+        (
+            self.tps_noise.variance().sqrt(),
+            self.watt_noise.variance().sqrt(),
+        )
     }
 
     /// The TPS has not moved by `static_tps_range_deg` over the motion window while the
@@ -517,9 +593,12 @@ impl ThrottleMonitor {
                 self.heal_run[2] = 0;
             }
             _ => {
+                let (tps_std_v, watt_std_w) = self.noise_levels();
                 tracing::debug!(
                     time_s = now_s,
                     fault = fault.name(),
+                    tps_std_v,
+                    watt_std_w,
                     "TPS failed: position from the wattmeter estimate"
                 );
                 self.tps_fault = d;
@@ -737,12 +816,26 @@ impl Monitor for ThrottleMonitor {
         // Filters. The TPS filter keeps running on a failed TPS (not on its rail readings), so
         // that its tests can see the sensor heal; the combined filter uses only what is trusted.
         let tps_usable = tps.is_some() && !rail_low && !rail_high;
+        // The noise estimates learn only while everything is healthy and nothing is pending.
+        let adapt = self.first_fail_s.is_none()
+            && self.rail_low_run == 0
+            && self.rail_high_run == 0
+            && self.tps_fault.is_none()
+            && self.watt_fault.is_none()
+            && self.plate_fault.is_none();
         let mut nis_t = f64::NAN;
         let mut z_t = f64::NAN;
+        let mut tps_fed = false;
         if let (true, Some(v)) = (tps_usable, tps) {
+            let r = self.tps_ukf.measurement_noise()[(0, 0)];
             if let Ok(inn) = self.tps_ukf.update(&Vector1::new(v), &uu) {
                 nis_t = inn.nis;
                 z_t = inn.normalized(0);
+                if adapt {
+                    self.tps_noise
+                        .push(inn.residual[0], inn.covariance[(0, 0)], r);
+                    tps_fed = true;
+                }
                 out(Output::Innovation {
                     filter: "tps",
                     residual: inn.residual.as_slice(),
@@ -764,11 +857,23 @@ impl Monitor for ThrottleMonitor {
             let var = 4.0 * mu * mu * p + 2.0 * p * p + self.both_ukf.measurement_noise()[(1, 1)];
             z_w = (w - (mu * mu + p)) / var.max(f64::MIN_POSITIVE).sqrt();
         }
+        if !tps_fed {
+            self.tps_noise.gap();
+        }
+        let mut watt_fed = false;
         if use_tps || use_watt {
             let y = Vector2::new(tps.unwrap_or(0.0), watt.unwrap_or(0.0));
+            let r = self.both_ukf.measurement_noise()[(1, 1)];
             if let Ok(inn) = self.both_ukf.update_subset(&y, &uu, &[use_tps, use_watt]) {
                 if use_watt {
                     z_w = inn.normalized(1);
+                    if adapt && use_tps {
+                        // `s - r` is the filter's own part; the floor in `r` stands for
+                        // slowly varying model error, which the differences cancel.
+                        self.watt_noise
+                            .push(inn.residual[1], inn.covariance[(1, 1)], r);
+                        watt_fed = true;
+                    }
                 }
                 if !use_tps && self.reacquire.observe(inn.nis, inn.dof) {
                     let _reset_ok = self.both_ukf.reset(eq, self.p0).is_ok();
@@ -781,6 +886,16 @@ impl Monitor for ThrottleMonitor {
                     dof: inn.dof,
                 });
             }
+        }
+
+        if !watt_fed {
+            self.watt_noise.gap();
+        }
+        self.apply_noise_levels();
+        // The wattmeter test waits for its noise level: judged against the configured level,
+        // a noisier wattmeter would fail it at once.
+        if !self.watt_noise.settled() {
+            z_w = f64::NAN;
         }
 
         // Residual tests.
