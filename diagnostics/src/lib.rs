@@ -20,6 +20,7 @@ pub mod detectors;
 pub mod dtc;
 pub mod error;
 pub mod evaluation;
+pub mod extreme_value;
 pub mod event;
 pub mod isolation;
 pub mod uds;

@@ -8,7 +8,10 @@ use std::collections::BTreeMap;
 use fdd_diagnostics::evaluation::{DtcKind, EvaluationReport, Evaluator, Truth};
 use fdd_diagnostics::event::EventView;
 use fdd_monitor::runtime::config::TruthConfig;
+use fdd_monitor::monitor::Output;
 use fdd_monitor::runtime::Runtime;
+
+use crate::replay::ReplayObserver;
 
 use super::fault_types::{fault_types, FaultType};
 
@@ -49,6 +52,28 @@ pub struct Evaluation {
     /// backwards), with the first message.
     pub refused: u64,
     pub first_refusal: Option<String>,
+}
+
+impl ReplayObserver for Evaluation {
+    fn begin_log(&mut self, rt: &Runtime, truths: &[TruthConfig]) {
+        Evaluation::begin_log(self, rt, truths);
+    }
+
+    fn output(&mut self, t_ns: u64, monitor: &str, output: &Output<'_>) {
+        match *output {
+            Output::Diagnosis { flagged, scores } => self.diagnosis(t_ns, monitor, flagged, scores),
+            Output::Event(ev) => self.event(t_ns, monitor, ev),
+            _ => {}
+        }
+    }
+
+    fn truth(&mut self, _t_ns: u64, index: usize, fault: &str, active: bool, observable: Option<bool>) {
+        Evaluation::truth(self, index, fault, active, observable);
+    }
+
+    fn end_log(&mut self) {
+        Evaluation::end_log(self);
+    }
 }
 
 impl Evaluation {

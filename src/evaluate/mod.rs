@@ -24,7 +24,7 @@ use serde::Serialize;
 
 pub use collector::Evaluation;
 
-use crate::replay::{replay_evaluating, ReplayError, ReplayOptions, RuntimeConfig};
+use crate::replay::{replay_observed, ReplayError, ReplayOptions, RuntimeConfig};
 use crate::simulate::SimulateError;
 
 /// Why an evaluation could not run.
@@ -144,9 +144,9 @@ pub fn evaluate(
                     source: Box::new(source),
                 }
             })?;
-            replay_evaluating(tmp.path(), cfg, &opts, &mut evaluation)?
+            replay_observed(tmp.path(), cfg, &opts, &mut evaluation)?
         } else {
-            replay_evaluating(file, cfg, &opts, &mut evaluation)?
+            replay_observed(file, cfg, &opts, &mut evaluation)?
         };
         if let Some(message) = summary.stopped_early {
             return Err(EvaluateError::StoppedEarly {

@@ -58,7 +58,6 @@ use fdd_monitor::runtime::{Runtime, RuntimeError, Stamped};
 use fdd_monitor::signal_table::SignalId;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::evaluate::Evaluation;
 
 pub use config::RuntimeConfig;
 pub use fdd_monitor::staleness::StalenessMonitor;
@@ -71,6 +70,7 @@ pub use summary::ReplaySummary;
 
 use config::s_to_ns;
 use problems::Problems;
+pub use sinks::ReplayObserver;
 use sinks::Sinks;
 use summary::{
     ErrorStats, EstimateError, MonitorSummary, SignalSummary, TopicSummary, TruthSummary,
@@ -131,12 +131,12 @@ struct SignalStats {
 /// Messages between progress-bar updates.
 const PROGRESS_EVERY: u64 = 1 << 14;
 
-struct Replayer<'c> {
+struct Replayer<'c, 'o> {
     cfg: &'c RuntimeConfig,
     file: PathBuf,
     rt: Runtime,
     sig_ids: Vec<SignalId>,
-    sinks: Sinks,
+    sinks: Sinks<'o>,
     channels: Vec<Option<Channel>>,
     sig: Vec<SignalStats>,
     problems: Problems,
@@ -154,11 +154,11 @@ struct Replayer<'c> {
 }
 
 /// The replay's sink: every runtime output to the collectors and writers.
-fn sink_of(sinks: &mut Sinks) -> impl FnMut(Stamped<'_>) + '_ {
+fn sink_of<'a, 'o>(sinks: &'a mut Sinks<'o>) -> impl FnMut(Stamped<'_>) + use<'a, 'o> {
     |o: Stamped<'_>| sinks.on_output(o.t_ns, o.monitor, o.output)
 }
 
-impl Replayer<'_> {
+impl Replayer<'_, '_> {
     fn runtime_error(&mut self, e: RuntimeError) {
         tracing::error!("{}: runtime refused a call: {e}", self.file.display());
     }
@@ -339,8 +339,8 @@ impl Replayer<'_> {
                     } else {
                         tm.value
                     };
-                    if let Some(ev) = sinks.evaluation.as_mut() {
-                        ev.truth(ti, &tm.fault, tm.fault_active, tm.fault_observable);
+                    if let Some(obs) = sinks.observer.as_mut() {
+                        obs.truth(t, ti, &tm.fault, tm.fault_active, tm.fault_observable);
                     }
                     if tm.fault_active && !truth_active[ti] {
                         sinks.fault_onset(&tm.fault, t);
@@ -409,30 +409,25 @@ pub fn replay(
     cfg: &RuntimeConfig,
     opts: &ReplayOptions,
 ) -> Result<ReplaySummary, ReplayError> {
-    replay_with(log, cfg, opts, &mut None)
+    replay_with(log, cfg, opts, None)
 }
 
-/// [`replay`], feeding an `fdd evaluate` collector with every step's diagnosis, the raised DTCs
-/// and the ground truth (the collector goes on across logs).
-pub fn replay_evaluating(
+/// [`replay`] with an observer that sees every monitor output (innovations, test statistics
+/// and diagnoses included) and the ground truth as they happen.
+pub fn replay_observed(
     log: &Path,
     cfg: &RuntimeConfig,
     opts: &ReplayOptions,
-    evaluation: &mut Evaluation,
+    observer: &mut dyn ReplayObserver,
 ) -> Result<ReplaySummary, ReplayError> {
-    let mut slot = Some(std::mem::take(evaluation));
-    let result = replay_with(log, cfg, opts, &mut slot);
-    if let Some(e) = slot {
-        *evaluation = e;
-    }
-    result
+    replay_with(log, cfg, opts, Some(observer))
 }
 
 fn replay_with(
     log: &Path,
     cfg: &RuntimeConfig,
     opts: &ReplayOptions,
-    evaluation: &mut Option<Evaluation>,
+    mut observer: Option<&mut dyn ReplayObserver>,
 ) -> Result<ReplaySummary, ReplayError> {
     let started = Instant::now();
     let mut reader = LogReader::open(log)?;
@@ -467,7 +462,7 @@ fn replay_with(
     // Innovations and test statistics only go to `--out`.
     let mut builder = Runtime::builder(cfg.clone())
         .only_monitors(&run_refs)
-        .detail_outputs(opts.out.is_some() || evaluation.is_some());
+        .detail_outputs(opts.out.is_some() || observer.is_some());
     if let Some(base) = &opts.memory {
         builder = builder.persistence(base);
     }
@@ -518,10 +513,10 @@ fn replay_with(
         .monitor_names()
         .filter_map(|m| Some((m.to_string(), rt.fault_classes(m)?)))
         .collect();
-    sinks.evaluation = evaluation.take();
-    if let Some(e) = sinks.evaluation.as_mut() {
-        e.begin_log(&rt, &cfg.truth);
+    if let Some(obs) = observer.as_mut() {
+        obs.begin_log(&rt, &cfg.truth);
     }
+    sinks.observer = observer;
 
     let mut r = Replayer {
         cfg,
@@ -579,9 +574,8 @@ fn replay_with(
         }
     };
     let wall_s = started.elapsed().as_secs_f64();
-    if let Some(mut e) = r.sinks.evaluation.take() {
-        e.end_log();
-        *evaluation = Some(e);
+    if let Some(obs) = r.sinks.observer.as_mut() {
+        obs.end_log();
     }
 
     if r.messages == 0 {

@@ -18,7 +18,8 @@ use fdd_monitor::monitor::Output;
 use serde::Serialize;
 
 use super::ReplayError;
-use crate::evaluate::Evaluation;
+use fdd_monitor::runtime::config::TruthConfig;
+use fdd_monitor::runtime::Runtime;
 use crate::stats::RunningStats;
 
 /// `/fdd/throttle/position`, borrowed (no allocation per message).
@@ -152,7 +153,7 @@ pub struct TruthTrack {
 
 /// The collectors and writers. Written to from inside monitor steps, so errors are kept in
 /// `error` and checked by the replay loop after each call.
-pub struct Sinks {
+pub struct Sinks<'o> {
     events_file: Option<(PathBuf, BufWriter<File>)>,
     out: Option<LogWriter<BufWriter<File>>>,
     /// The first write error; nothing more is written after it.
@@ -171,11 +172,25 @@ pub struct Sinks {
     pub unwritten: u64,
     /// Each monitor's diagnosis classes (the names of its `scores`), for `--out`.
     pub classes: Vec<(String, &'static [&'static str])>,
-    /// `fdd evaluate`'s collector, when evaluating.
-    pub evaluation: Option<Evaluation>,
+    /// A client watching every output (`fdd evaluate`, `fdd calibrate`).
+    pub observer: Option<&'o mut dyn ReplayObserver>,
 }
 
-impl Sinks {
+/// A client of a replay that sees every monitor output and the ground truth as they happen
+/// (`fdd evaluate` and `fdd calibrate` are replays with an observer).
+pub trait ReplayObserver {
+    /// A log starts, replayed by `rt`; `truths` are the configuration's truth topics.
+    fn begin_log(&mut self, rt: &Runtime, truths: &[TruthConfig]);
+    /// One output of `monitor`'s step at `t_ns`.
+    fn output(&mut self, t_ns: u64, monitor: &str, output: &Output<'_>);
+    /// A truth message of truth topic `index` (its `fault`, `fault_active` and, if the truth
+    /// says, `fault_observable`).
+    fn truth(&mut self, t_ns: u64, index: usize, fault: &str, active: bool, observable: Option<bool>);
+    /// The log ended.
+    fn end_log(&mut self);
+}
+
+impl Sinks<'_> {
     pub fn new(
         events_file: Option<(PathBuf, BufWriter<File>)>,
         out: Option<LogWriter<BufWriter<File>>>,
@@ -200,23 +215,18 @@ impl Sinks {
             onsets: Vec::new(),
             unwritten: 0,
             classes: Vec::new(),
-            evaluation: None,
+            observer: None,
         }
     }
 
     /// Takes one output of `monitor`'s step at `t_ns`.
     pub fn on_output(&mut self, t_ns: u64, monitor: &str, o: Output<'_>) {
+        if let Some(obs) = self.observer.as_mut() {
+            obs.output(t_ns, monitor, &o);
+        }
         match o {
-            Output::Event(ev) => {
-                if let Some(e) = self.evaluation.as_mut() {
-                    e.event(t_ns, monitor, ev);
-                }
-                self.on_event(t_ns, ev)
-            }
+            Output::Event(ev) => self.on_event(t_ns, ev),
             Output::Diagnosis { flagged, scores } => {
-                if let Some(e) = self.evaluation.as_mut() {
-                    e.diagnosis(t_ns, monitor, flagged, scores);
-                }
                 if self.out.is_some() {
                     let classes = self
                         .classes
