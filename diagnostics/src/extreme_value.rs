@@ -175,7 +175,10 @@ mod tests {
         let h = f.threshold(1e-3, 10.0);
         assert!((f.rate_per_hour(h, 10.0) - 1e-3).abs() < 1e-9);
         // p = 1e-3 * 10 / 3600; h = mu + beta * (-ln(-ln(1 - p))) ~ mu + 12.8 beta.
-        assert!((h - (f.location + 12.79 * f.scale)).abs() < 0.05 * f.scale, "{h}");
+        assert!(
+            (h - (f.location + 12.79 * f.scale)).abs() < 0.05 * f.scale,
+            "{h}"
+        );
         assert!((gumbel_mean(f.location, f.scale) - x.iter().sum::<f64>() / 2000.0).abs() < 0.15);
     }
 
@@ -193,7 +196,10 @@ mod tests {
         let f = GumbelFit::fit(&x).expect("fit");
         assert!(f.ppcc > 0.98, "{f:?}");
         // ln(500) = 6.2 and scale 1 for exponential blocks of 500.
-        assert!((f.location - 6.2).abs() < 0.3 && (f.scale - 1.0).abs() < 0.2, "{f:?}");
+        assert!(
+            (f.location - 6.2).abs() < 0.3 && (f.scale - 1.0).abs() < 0.2,
+            "{f:?}"
+        );
         for v in x.iter_mut().take(30) {
             *v += 200.0;
         }

@@ -7,8 +7,8 @@ use std::collections::BTreeMap;
 
 use fdd_diagnostics::evaluation::{DtcKind, EvaluationReport, Evaluator, Truth};
 use fdd_diagnostics::event::EventView;
-use fdd_monitor::runtime::config::TruthConfig;
 use fdd_monitor::monitor::Output;
+use fdd_monitor::runtime::config::TruthConfig;
 use fdd_monitor::runtime::Runtime;
 
 use crate::replay::ReplayObserver;
@@ -23,7 +23,14 @@ struct TruthState {
     active: bool,
     observable: bool,
     fault: String,
+    /// When the last fault ended (active -> inactive), ns.
+    ended_ns: Option<u64>,
 }
+
+/// After a fault ends, this long (s) counts nowhere: a monitor needs evidence that a fault is
+/// gone before its test passes again (the throttle monitor's `heal_s` is 5 s), so flags in it
+/// are neither false alarms nor detections.
+pub const HEAL_GRACE_S: f64 = 10.0;
 
 /// One monitor's evaluation.
 #[derive(Debug, Clone)]
@@ -67,8 +74,15 @@ impl ReplayObserver for Evaluation {
         }
     }
 
-    fn truth(&mut self, _t_ns: u64, index: usize, fault: &str, active: bool, observable: Option<bool>) {
-        Evaluation::truth(self, index, fault, active, observable);
+    fn truth(
+        &mut self,
+        t_ns: u64,
+        index: usize,
+        fault: &str,
+        active: bool,
+        observable: Option<bool>,
+    ) {
+        Evaluation::truth(self, t_ns, index, fault, active, observable);
     }
 
     fn end_log(&mut self) {
@@ -131,8 +145,18 @@ impl Evaluation {
 
     /// A truth message of the configuration's truth topic `index`. `observable` is the truth's
     /// `fault_observable` (absent: as `active`).
-    pub fn truth(&mut self, index: usize, fault: &str, active: bool, observable: Option<bool>) {
+    pub fn truth(
+        &mut self,
+        t_ns: u64,
+        index: usize,
+        fault: &str,
+        active: bool,
+        observable: Option<bool>,
+    ) {
         if let Some(s) = self.truths.get_mut(index) {
+            if s.active && !active {
+                s.ended_ns = Some(t_ns);
+            }
             s.seen = true;
             s.active = active;
             s.observable = active && observable.unwrap_or(true);
@@ -154,7 +178,12 @@ impl Evaluation {
         if !state.seen {
             return;
         }
-        let truth = if !state.active {
+        let healing = state
+            .ended_ns
+            .is_some_and(|e| (t_ns.saturating_sub(e) as f64) * 1e-9 < HEAL_GRACE_S);
+        let truth = if !state.active && healing {
+            Truth::Ignored
+        } else if !state.active {
             Truth::FaultFree
         } else {
             // Two faults at once are written `a+b`: the sample counts for the first one the
@@ -208,6 +237,27 @@ impl Evaluation {
                 .filter(|(_, t)| t.dtcs.contains(&ev.event))
                 .map(|(i, _)| i),
         );
+        // Two faults at once (`a+b`) count as an episode of the first: a DTC naming the other
+        // active one is as correct.
+        if let Some(state) = m.truth.and_then(|i| self.truths.get(i)) {
+            if state.active && state.fault.contains('+') {
+                let named = |f: &str| {
+                    m.types
+                        .iter()
+                        .position(|t| t.truth == f)
+                        .is_some_and(|i| self.classes.contains(&i))
+                };
+                let first = state
+                    .fault
+                    .split('+')
+                    .find_map(|f| m.types.iter().position(|t| t.truth == f));
+                if let Some(first) = first {
+                    if state.fault.split('+').any(named) && !self.classes.contains(&first) {
+                        self.classes.push(first);
+                    }
+                }
+            }
+        }
         if let Err(e) = m
             .evaluator
             .dtc(t_ns as f64 * 1e-9, &self.classes, DtcKind::Specific)

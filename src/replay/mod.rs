@@ -58,7 +58,6 @@ use fdd_monitor::runtime::{Runtime, RuntimeError, Stamped};
 use fdd_monitor::signal_table::SignalId;
 use indicatif::{ProgressBar, ProgressStyle};
 
-
 pub use config::RuntimeConfig;
 pub use fdd_monitor::staleness::StalenessMonitor;
 pub use problems::{Problem, ProblemKind};

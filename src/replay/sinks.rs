@@ -18,9 +18,9 @@ use fdd_monitor::monitor::Output;
 use serde::Serialize;
 
 use super::ReplayError;
+use crate::stats::RunningStats;
 use fdd_monitor::runtime::config::TruthConfig;
 use fdd_monitor::runtime::Runtime;
-use crate::stats::RunningStats;
 
 /// `/fdd/throttle/position`, borrowed (no allocation per message).
 #[derive(Serialize)]
@@ -185,7 +185,14 @@ pub trait ReplayObserver {
     fn output(&mut self, t_ns: u64, monitor: &str, output: &Output<'_>);
     /// A truth message of truth topic `index` (its `fault`, `fault_active` and, if the truth
     /// says, `fault_observable`).
-    fn truth(&mut self, t_ns: u64, index: usize, fault: &str, active: bool, observable: Option<bool>);
+    fn truth(
+        &mut self,
+        t_ns: u64,
+        index: usize,
+        fault: &str,
+        active: bool,
+        observable: Option<bool>,
+    );
     /// The log ended.
     fn end_log(&mut self);
 }

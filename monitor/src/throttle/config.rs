@@ -18,8 +18,8 @@ pub struct ThrottleMonitorConfig {
     /// Wattmeter noise standard deviation (W); R = std^2 + `wattmeter_r_floor`.
     pub wattmeter_noise_w: f64,
     pub wattmeter_r_floor: f64,
-    /// The noise levels are estimated online while nothing fails (from differences of
-    /// consecutive innovations, which a bias or model error does not inflate), within these
+    /// The noise levels are estimated online while nothing fails (from second differences of
+    /// the raw readings, model-free: see `fdd_estimators::noise_level`), within these
     /// bounds (standard deviations, V and W): a host need not know its sensors' noise. The
     /// configured levels are used for the first `noise_settle_s` of a cycle, and the wattmeter
     /// test waits for its estimate.
@@ -65,6 +65,16 @@ pub struct ThrottleMonitorConfig {
     /// CUSUM on the combined filter's wattmeter innovation.
     pub watt_cusum_min_bias_sigma: f64,
     pub watt_cusum_threshold: f64,
+    /// Wattmeter residuals within +-this (W) count as model error, not as evidence of a
+    /// wattmeter fault (a dead band before the CUSUM): a plant a percent off Table I leaves
+    /// residual means of a few hundredths of a watt, which a quiet wattmeter's CUSUM would
+    /// otherwise accumulate.
+    pub watt_model_error_w: f64,
+    /// A wattmeter fault is named only after this many alarms of its test within
+    /// `watt_confirm_s` of the first (the test restarts after each alarm; a fault keeps it
+    /// alarming, a burst of model error does not).
+    pub watt_confirm_alarms: u32,
+    pub watt_confirm_s: f64,
     /// Normalized innovations are clipped to +-this before the CUSUMs (robust to the model's
     /// rare mode-switch outliers).
     pub cusum_clip_sigma: f64,
@@ -107,7 +117,6 @@ impl Default for ThrottleMonitorConfig {
             tps_noise_v: 0.0052,
             wattmeter_noise_w: 0.1,
             wattmeter_r_floor: 0.01,
-            tps_noise_min_v: 0.0026,
             tps_noise_max_v: 0.0156,
             wattmeter_noise_min_w: 0.03,
             wattmeter_noise_max_w: 0.8,
@@ -129,6 +138,10 @@ impl Default for ThrottleMonitorConfig {
             tps_cusum_threshold: 40.0,
             watt_cusum_min_bias_sigma: 0.5,
             watt_cusum_threshold: 35.0,
+            watt_model_error_w: 0.05,
+            watt_confirm_alarms: 3,
+            watt_confirm_s: 2.0,
+            tps_noise_min_v: 0.0052,
             cusum_clip_sigma: 8.0,
             decision_window_s: 0.2,
             motion_window_s: 0.2,

@@ -241,6 +241,8 @@ pub struct ThrottleMonitor {
     last_tps: f64,
     first_fail_s: Option<f64>,
     fired: [bool; 3],
+    /// Wattmeter test alarms in the current episode.
+    watt_alarms: u32,
     /// The first failing residual test's result, kept through the decision window.
     first_result: TestResult,
     /// The fault decided per component (position sensor, wattmeter, plate): each removes from
@@ -434,6 +436,7 @@ impl ThrottleMonitor {
             last_tps: f64::NAN,
             first_fail_s: None,
             fired: [false; 3],
+            watt_alarms: 0,
             first_result: TestResult::NOT_TESTED,
             tps_fault: None,
             watt_fault: None,
@@ -502,8 +505,7 @@ impl ThrottleMonitor {
         self.tps_noise.reset();
         self.watt_noise.reset();
         self.noise_steps = 0;
-        self.first_fail_s = None;
-        self.fired = [false; 3];
+        self.end_episode();
         self.nis_ring.clear();
         self.nis_sum = 0.0;
         self.dropouts.clear();
@@ -576,6 +578,13 @@ impl ThrottleMonitor {
         None
     }
 
+    /// Closes the residual episode.
+    fn end_episode(&mut self) {
+        self.first_fail_s = None;
+        self.fired = [false; 3];
+        self.watt_alarms = 0;
+    }
+
     /// Sets the component of `fault` failed, and restarts the tests that will see it heal.
     fn set_failed(&mut self, fault: ThrottleFault, result: TestResult, now_s: f64) {
         let d = Some(Decided {
@@ -583,6 +592,15 @@ impl ThrottleMonitor {
             result,
             since_s: now_s,
         });
+        let (tps_std_v, watt_std_w) = self.noise_levels();
+        tracing::debug!(
+            time_s = now_s,
+            fault = fault.name(),
+            tps_std_v,
+            watt_std_w,
+            watt_samples = self.watt_noise.samples(),
+            "throttle fault decided"
+        );
         match fault {
             ThrottleFault::Wattmeter => {
                 self.watt_fault = d;
@@ -663,8 +681,7 @@ impl ThrottleMonitor {
                 verdict: Verdict::Failed,
             };
             self.set_failed(ThrottleFault::PlateStuck, r, now_s);
-            self.first_fail_s = None;
-            self.fired = [false; 3];
+            self.end_episode();
         }
         // Residual episode: the tests of the components that are not failed open it; after
         // the decision window the fault is named.
@@ -685,13 +702,30 @@ impl ThrottleMonitor {
                 }
             }
         }
+        if eligible[2] && results[2].verdict == Verdict::Failed {
+            self.watt_alarms += 1;
+        }
         if let Some(t0) = self.first_fail_s {
-            if now_s - t0 >= self.cfg.decision_window_s {
-                if let Some(f) = self.classify() {
-                    self.set_failed(f, self.first_result, now_s);
+            let elapsed = now_s - t0;
+            if elapsed >= self.cfg.decision_window_s {
+                match self.classify() {
+                    // A wattmeter fault is persistent: its CUSUM (which restarts after each
+                    // alarm) must alarm `watt_confirm_alarms` times within `watt_confirm_s`;
+                    // a burst of model error alarms once. Meanwhile the TPS tests may fire
+                    // and name the TPS instead (a drifting TPS pulls the current estimate).
+                    Some(ThrottleFault::Wattmeter)
+                        if self.watt_alarms < self.cfg.watt_confirm_alarms =>
+                    {
+                        if elapsed >= self.cfg.watt_confirm_s {
+                            self.end_episode();
+                        }
+                    }
+                    Some(f) => {
+                        self.set_failed(f, self.first_result, now_s);
+                        self.end_episode();
+                    }
+                    None => self.end_episode(),
                 }
-                self.first_fail_s = None;
-                self.fired = [false; 3];
             }
         }
         // Healing: a failed component whose tests pass for `heal_s` is healthy again (its
@@ -827,15 +861,14 @@ impl Monitor for ThrottleMonitor {
         let mut z_t = f64::NAN;
         let mut tps_fed = false;
         if let (true, Some(v)) = (tps_usable, tps) {
-            let r = self.tps_ukf.measurement_noise()[(0, 0)];
+            // Readings at the ADC's ends are clipped, not noisy: they say nothing of the noise.
+            if adapt && v > self.cfg.rail_low_v && v < self.cfg.rail_high_v {
+                self.tps_noise.push(v);
+                tps_fed = true;
+            }
             if let Ok(inn) = self.tps_ukf.update(&Vector1::new(v), &uu) {
                 nis_t = inn.nis;
                 z_t = inn.normalized(0);
-                if adapt {
-                    self.tps_noise
-                        .push(inn.residual[0], inn.covariance[(0, 0)], r);
-                    tps_fed = true;
-                }
                 out(Output::Innovation {
                     filter: "tps",
                     residual: inn.residual.as_slice(),
@@ -850,30 +883,30 @@ impl Monitor for ThrottleMonitor {
             tps_trusted && tps_usable && nis_t.is_finite() && nis_t < self.cfg.tps_gate_nis;
         let use_watt = watt.is_some() && self.watt_fault.is_none();
         let mut z_w = f64::NAN;
+        // The wattmeter innovation's standard deviation (W), for the model-error dead band.
+        let mut sigma_w = f64::NAN;
         if let (false, Some(w)) = (use_watt, watt) {
             // A failed wattmeter is still compared with the combined filter's prediction of
             // `i^2` (Gaussian moments: mean mu^2 + P, variance 4 mu^2 P + 2 P^2, plus R).
             let (mu, p) = (self.both_ukf.state()[2], self.both_ukf.covariance()[(2, 2)]);
             let var = 4.0 * mu * mu * p + 2.0 * p * p + self.both_ukf.measurement_noise()[(1, 1)];
-            z_w = (w - (mu * mu + p)) / var.max(f64::MIN_POSITIVE).sqrt();
+            sigma_w = var.max(f64::MIN_POSITIVE).sqrt();
+            z_w = (w - (mu * mu + p)) / sigma_w;
         }
         if !tps_fed {
             self.tps_noise.gap();
         }
         let mut watt_fed = false;
+        if let (true, Some(w)) = (adapt && use_watt, watt) {
+            self.watt_noise.push(w);
+            watt_fed = true;
+        }
         if use_tps || use_watt {
             let y = Vector2::new(tps.unwrap_or(0.0), watt.unwrap_or(0.0));
-            let r = self.both_ukf.measurement_noise()[(1, 1)];
             if let Ok(inn) = self.both_ukf.update_subset(&y, &uu, &[use_tps, use_watt]) {
                 if use_watt {
                     z_w = inn.normalized(1);
-                    if adapt && use_tps {
-                        // `s - r` is the filter's own part; the floor in `r` stands for
-                        // slowly varying model error, which the differences cancel.
-                        self.watt_noise
-                            .push(inn.residual[1], inn.covariance[(1, 1)], r);
-                        watt_fed = true;
-                    }
+                    sigma_w = inn.covariance[(1, 1)].sqrt();
                 }
                 if !use_tps && self.reacquire.observe(inn.nis, inn.dof) {
                     let _reset_ok = self.both_ukf.reset(eq, self.p0).is_ok();
@@ -918,6 +951,10 @@ impl Monitor for ThrottleMonitor {
             TestResult::NOT_TESTED
         };
         let cusum_tps = self.cusum_tps.step(z_t.clamp(-clip, clip), z_t.is_finite());
+        // Residuals within the model-error allowance are no evidence of a wattmeter fault (a dead
+        // band in innovation units: wide when the wattmeter is quiet, narrow when it is noisy).
+        let band = self.cfg.watt_model_error_w / sigma_w;
+        let z_w = z_w - z_w.clamp(-band, band);
         let cusum_watt = self
             .cusum_watt
             .step(z_w.clamp(-clip, clip), z_w.is_finite());
@@ -998,9 +1035,9 @@ impl Monitor for ThrottleMonitor {
             },
         });
 
-        // Diagnosis: flagged while a fault is decided, a residual test has failed and the
-        // decision window runs, or the TPS reads a rail the model calls implausible. Each
-        // decided fault scores 1; while pending, so does what the evidence so far points at.
+        // Diagnosis: flagged while a fault is decided (a suspicion still being isolated is
+        // not flagged: most die out, and a flag is what the monitor asserts). Each decided fault
+        // scores 1.
         self.scores = [0.0; 7];
         let mut flagged = false;
         for d in [self.tps_fault, self.watt_fault, self.plate_fault]
@@ -1008,19 +1045,6 @@ impl Monitor for ThrottleMonitor {
             .flatten()
         {
             self.scores[d.fault.class()] = 1.0;
-            flagged = true;
-        }
-        let provisional = if self.tps_fault.is_none() && self.rail_low_run > 0 {
-            Some(ThrottleFault::TpsOpen)
-        } else if self.tps_fault.is_none() && self.rail_high_run > 0 {
-            Some(ThrottleFault::TpsShort)
-        } else if self.first_fail_s.is_some() {
-            self.classify()
-        } else {
-            None
-        };
-        if let Some(f) = provisional {
-            self.scores[f.class()] = 1.0;
             flagged = true;
         }
         out(Output::Diagnosis {

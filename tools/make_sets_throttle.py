@@ -1,0 +1,230 @@
+#!/usr/bin/env python3
+"""Writes the throttle scenario sets: fixtures/sets/throttle_tuning/ and throttle_heldout/.
+
+Deterministic (fixed seeds): running it again rewrites the same files. The two sets differ in
+everything a new vehicle would change (fixtures/sets/README.md says how):
+
+- tuning: seeds 1000+, excitation pulse_train / chirp / pedal_ramps, wattmeter noise 0.05 to
+  0.3 W, Table I error up to 1 %, fault sizes as the committed fixtures';
+- held-out: seeds 5000+, excitation steady_holds / idle_blips / mixed, wattmeter noise 0.05 to
+  0.5 W, Table I error up to 1.5 %, stops and restitution, TPS and wattmeter gain and offset
+  errors and lags, fault sizes 0.75 to 1.5 times the fixtures', long fault-free driving
+  (>= 10 h in all).
+
+Nothing in the monitors may be chosen by looking at results on the held-out set.
+
+Usage: python3 tools/make_sets_throttle.py   (from the repository root)
+"""
+
+import os
+import random
+import shutil
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SETS = os.path.join(ROOT, "fixtures", "sets")
+
+# Fault sizes of the committed fixtures (fixtures/scenarios/throttle_*.toml).
+FIXTURE = {
+    "tps_bias": {"bias_deg": 8.0},
+    "tps_drift": {"drift_deg_per_s": 2.0},
+    "tps_noise": {"noise_std_v": 0.2},
+    "tps_intermittent": {"dropout_rate_hz": 5.0},
+    "wattmeter": {"gain": 1.0, "offset_w": 0.3},
+}
+KINDS = [
+    "tps_stuck",
+    "tps_bias",
+    "tps_drift",
+    "tps_open",
+    "tps_short",
+    "tps_intermittent",
+    "tps_noise",
+    "wattmeter",
+    "plate_stuck",
+]
+
+
+def fmt(v):
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int,)):
+        return str(v)
+    if isinstance(v, float):
+        return repr(round(v, 6))
+    if isinstance(v, str):
+        return '"%s"' % v
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(fmt(x) for x in v) + "]"
+    raise TypeError(v)
+
+
+def table(name, d):
+    lines = ["[%s]" % name]
+    for k, v in d.items():
+        lines.append("%s = %s" % (k, fmt(v)))
+    return "\n".join(lines) + "\n"
+
+
+def fault_table(rng, kind, start_s, scale, end_s=None):
+    f = {"kind": kind, "start_s": start_s}
+    if end_s is not None:
+        f["end_s"] = end_s
+    for k, v in FIXTURE.get(kind, {}).items():
+        if kind == "wattmeter" and k == "gain":
+            # A shunt/gain error of the same relative size as the offset's.
+            f[k] = 1.0 + (0.15 * scale if rng.random() < 0.5 else 0.0)
+        else:
+            sign = -1.0 if (kind in ("tps_bias", "tps_drift") and rng.random() < 0.5) else 1.0
+            f[k] = sign * v * scale
+    return f
+
+
+def scenario(name, seed, duration_s, excitation, sensors, plant, fault, second=None, comment=""):
+    text = "# %s\n" % comment if comment else ""
+    text += 'name = "%s"\nmonitor = "throttle"\nduration_s = %s\nseed = %d\n\n' % (
+        name,
+        fmt(float(duration_s)),
+        seed,
+    )
+    text += table("excitation", excitation) + "\n"
+    text += table("sensors", sensors) + "\n"
+    if plant:
+        text += table("plant", plant) + "\n"
+    text += table("fault", fault)
+    if second:
+        text += "\n" + table("second_fault", second)
+    return text
+
+
+def write_set(dirname, items):
+    d = os.path.join(SETS, dirname)
+    if os.path.isdir(d):
+        shutil.rmtree(d)
+    os.makedirs(d)
+    for name, text in items:
+        with open(os.path.join(d, name + ".toml"), "w") as f:
+            f.write(text)
+
+
+def tuning():
+    rng = random.Random(1)
+    styles = ["pulse_train", "chirp", "pedal_ramps"]
+    items = []
+    n = 0
+
+    def common(i):
+        exc = {"kind": styles[i % len(styles)]}
+        sensors = {"wattmeter_noise_std_w": rng.choice([0.05, 0.1, 0.2, 0.3])}
+        plant = {}
+        if rng.random() < 0.6:
+            plant["table1_rel_error"] = rng.choice([0.005, 0.01])
+            plant["table1_max_draws"] = 200
+        return exc, sensors, plant
+
+    # Nominal drives: 6 x 10 min.
+    for i in range(6):
+        exc, sensors, plant = common(i)
+        name = "throttle_tuning_%02d_nominal" % n
+        items.append((name, scenario(name, 1000 + n, 600, exc, sensors, plant, {"kind": "none"},
+                                     comment="tuning: fault-free drive")))
+        n += 1
+    # Every fault type, 3 logs each, fixture sizes, onset after 60-120 s of fault-free driving.
+    for kind in KINDS:
+        for j in range(3):
+            exc, sensors, plant = common(n)
+            start = float(rng.randint(60, 120))
+            f = fault_table(rng, kind, start, 1.0)
+            name = "throttle_tuning_%02d_%s" % (n, kind)
+            items.append((name, scenario(name, 1000 + n, start + 60, exc, sensors, plant, f,
+                                         comment="tuning: %s from %g s" % (kind, start))))
+            n += 1
+    # Healing faults and two at once.
+    for kind in ["tps_bias", "tps_open", "wattmeter", "plate_stuck"]:
+        exc, sensors, plant = common(n)
+        f = fault_table(rng, kind, 60.0, 1.0, end_s=90.0)
+        name = "throttle_tuning_%02d_%s_heals" % (n, kind)
+        items.append((name, scenario(name, 1000 + n, 150, exc, sensors, plant, f,
+                                     comment="tuning: %s from 60 s to 90 s" % kind)))
+        n += 1
+    for first, second in [("wattmeter", "tps_bias"), ("wattmeter", "tps_open")]:
+        exc, sensors, plant = common(n)
+        f = fault_table(rng, first, 60.0, 1.0)
+        g = fault_table(rng, second, 100.0, 1.0)
+        name = "throttle_tuning_%02d_%s_then_%s" % (n, first, second)
+        items.append((name, scenario(name, 1000 + n, 160, exc, sensors, plant, f, g,
+                                     comment="tuning: %s from 60 s, then %s from 100 s" % (first, second))))
+        n += 1
+    return items
+
+
+def heldout():
+    rng = random.Random(5)
+    styles = ["steady_holds", "idle_blips", "mixed"]
+    items = []
+    n = 0
+
+    def common(i):
+        exc = {"kind": styles[i % len(styles)]}
+        sensors = {
+            "wattmeter_noise_std_w": rng.choice([0.05, 0.15, 0.25, 0.35, 0.45, 0.5]),
+            "tps_noise_std_v": rng.choice([0.003, 0.005, 0.008]),
+            "tps_gain": 1.0 + rng.uniform(-0.02, 0.02),
+            "tps_offset_v": rng.uniform(-0.02, 0.02),
+            "wattmeter_gain": 1.0 + rng.uniform(-0.05, 0.05),
+        }
+        if rng.random() < 0.5:
+            sensors["tps_lag_s"] = rng.choice([0.001, 0.002])
+        if rng.random() < 0.5:
+            sensors["wattmeter_lag_s"] = rng.choice([0.001, 0.003])
+        plant = {
+            "table1_rel_error": rng.choice([0.0, 0.005, 0.01, 0.015]),
+            "table1_max_draws": 500,
+            "stop_restitution": rng.choice([0.0, 0.1, 0.3]),
+            "process_noise_scale": rng.choice([0.5, 1.0, 2.0]),
+        }
+        return exc, sensors, plant
+
+    # Fault-free: 12 drives of 30 min (6 h).
+    for i in range(12):
+        exc, sensors, plant = common(i)
+        name = "throttle_heldout_%02d_nominal" % n
+        items.append((name, scenario(name, 5000 + n, 1800, exc, sensors, plant, {"kind": "none"},
+                                     comment="held-out: fault-free drive")))
+        n += 1
+    # Every fault type, 4 logs each (36), sizes 0.75-1.5x, onset after 7-9 min (>= 4.2 h).
+    for kind in KINDS:
+        for j in range(4):
+            exc, sensors, plant = common(n)
+            start = float(rng.randint(420, 540))
+            scale = rng.uniform(0.75, 1.5)
+            f = fault_table(rng, kind, start, scale)
+            name = "throttle_heldout_%02d_%s" % (n, kind)
+            items.append((name, scenario(name, 5000 + n, start + 60, exc, sensors, plant, f,
+                                         comment="held-out: %s from %g s, size x%.2f" % (kind, start, scale))))
+            n += 1
+    # Healing and two at once.
+    for kind in ["tps_drift", "tps_short", "wattmeter", "plate_stuck"]:
+        exc, sensors, plant = common(n)
+        scale = rng.uniform(0.75, 1.5)
+        f = fault_table(rng, kind, 300.0, scale, end_s=340.0)
+        name = "throttle_heldout_%02d_%s_heals" % (n, kind)
+        items.append((name, scenario(name, 5000 + n, 400, exc, sensors, plant, f,
+                                     comment="held-out: %s from 300 s to 340 s" % kind)))
+        n += 1
+    for first, second in [("wattmeter", "tps_stuck"), ("wattmeter", "tps_drift")]:
+        exc, sensors, plant = common(n)
+        f = fault_table(rng, first, 300.0, rng.uniform(0.75, 1.5))
+        g = fault_table(rng, second, 340.0, rng.uniform(0.75, 1.5))
+        name = "throttle_heldout_%02d_%s_then_%s" % (n, first, second)
+        items.append((name, scenario(name, 5000 + n, 400, exc, sensors, plant, f, g,
+                                     comment="held-out: %s from 300 s, then %s from 340 s" % (first, second))))
+        n += 1
+    return items
+
+
+if __name__ == "__main__":
+    t = tuning()
+    h = heldout()
+    write_set("throttle_tuning", t)
+    write_set("throttle_heldout", h)
+    print("wrote %d tuning and %d held-out throttle scenarios" % (len(t), len(h)))
