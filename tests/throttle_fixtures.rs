@@ -21,6 +21,10 @@ use fdd_monitor::throttle::ThrottleMonitor;
 struct Run {
     /// (time s, DTC) each time testFailed went 0 -> 1.
     raised: Vec<(f64, String)>,
+    /// (time s, DTC, status byte after) each time testFailed went 1 -> 0 (a test passing again).
+    cleared: Vec<(f64, String, u8)>,
+    /// Time the position output came back to the TPS after a switch.
+    back_to_tps_s: Option<f64>,
     /// Time of the first estimate from the wattmeter.
     switched_s: Option<f64>,
     /// Estimate error against truth after the switch: n, sum, sum of squares.
@@ -75,6 +79,17 @@ fn run(samples: impl Iterator<Item = (u64, f64, f64, f64, f64, bool)>) -> Run {
                 if e.status_after.byte() & 1 == 1 && e.status_before.byte() & 1 == 0 =>
             {
                 r.raised.push((e.time_s, e.dtc.to_string()));
+            }
+            Output::Event(e)
+                if e.status_after.byte() & 1 == 0 && e.status_before.byte() & 1 == 1 =>
+            {
+                r.cleared
+                    .push((e.time_s, e.dtc.to_string(), e.status_after.byte()));
+            }
+            Output::Estimate { source: "tps", .. }
+                if r.switched_s.is_some() && r.back_to_tps_s.is_none() =>
+            {
+                r.back_to_tps_s = Some(now.get());
             }
             Output::Estimate {
                 value,
@@ -245,4 +260,106 @@ fn one_hour_nominal_at_1khz_raises_nothing() {
         "false alarms in one hour: {:?}",
         r.raised
     );
+}
+
+/// Runs a scenario given as TOML text on the plant's own parameters.
+fn run_scenario(toml: &str) -> Run {
+    let sc = Scenario::parse(toml, "test scenario").expect("scenario");
+    let plant = ThrottlePlant::nominal().expect("plant");
+    let sim = ThrottleSim::new(&sc, &plant).expect("sim");
+    run(sim.map(|f| {
+        (
+            f.t_ns,
+            f.motor_voltage_v,
+            f.tps_v,
+            f.wattmeter_w,
+            f.truth_angle_deg,
+            f.fault_active,
+        )
+    }))
+}
+
+/// No fault hides another: after a wattmeter fault the TPS is still tested, and a TPS bias
+/// later in the cycle gets its own DTC (and the switch to the wattmeter estimate).
+#[test]
+fn a_wattmeter_fault_then_a_tps_fault_give_both_dtcs() {
+    let r = run_scenario(
+        r#"
+name = "throttle_watt_then_tps"
+monitor = "throttle"
+duration_s = 50.0
+seed = 41
+[fault]
+kind = "wattmeter"
+start_s = 20.0
+gain = 1.0
+offset_w = 0.3
+[second_fault]
+kind = "tps_bias"
+start_s = 35.0
+bias_deg = 8.0
+"#,
+    );
+    let first = |code: &str| {
+        r.raised
+            .iter()
+            .find(|(_, d)| d.starts_with(code))
+            .map(|(t, _)| *t)
+    };
+    assert!(r.raised.iter().all(|(t, _)| *t >= 20.0), "{:?}", r.raised);
+    let watt = first("P1651").expect("wattmeter DTC");
+    assert!((20.0..22.0).contains(&watt), "P1651 at {watt}");
+    let tps = first("P0121").expect("TPS DTC after the wattmeter's");
+    assert!((35.0..36.0).contains(&tps), "P0121 at {tps}");
+    let switch = first("P2106").expect("switch");
+    assert!((switch - tps).abs() < 0.002, "switch {switch}, TPS {tps}");
+}
+
+/// A TPS open circuit from 20 s to 30 s: P0122 is raised, and once the reading is back for
+/// `heal_s` its test passes again: testFailed clears while testFailedThisOperationCycle stays
+/// set (ISO 14229-1), and the position output returns to the TPS.
+#[test]
+fn a_tps_fault_that_ends_heals() {
+    let r = run_scenario(
+        r#"
+name = "throttle_open_heals"
+monitor = "throttle"
+duration_s = 50.0
+seed = 43
+# The plate held open (35 to 80 deg), so that a 0 V reading is implausible at once.
+[excitation]
+kind = "steady_holds"
+level_v = [0.5, 1.0]
+hold_s = [3.0, 8.0]
+[fault]
+kind = "tps_open"
+start_s = 20.0
+end_s = 30.0
+"#,
+    );
+    let raised: Vec<&str> = r.raised.iter().map(|(_, d)| d.as_str()).collect();
+    assert!(
+        raised.contains(&"P0122-16") && raised.contains(&"P2106-00"),
+        "{raised:?}"
+    );
+    assert!(
+        r.raised.iter().all(|(t, _)| (20.0..20.1).contains(t)),
+        "{:?}",
+        r.raised
+    );
+    let heal = ThrottleConfig::load(None).expect("config").monitor.heal_s;
+    for code in ["P0122-16", "P2106-00"] {
+        let (t, _, status) = r
+            .cleared
+            .iter()
+            .find(|(_, d, _)| d == code)
+            .unwrap_or_else(|| panic!("{code} never cleared: {:?}", r.cleared));
+        assert!(
+            *t > 30.0 + heal - 0.01 && *t < 30.0 + heal + 1.0,
+            "{code} cleared at {t}"
+        );
+        assert_eq!(status & 0b11, 0b10, "{code}: status {status:#04x}");
+    }
+    let back = r.back_to_tps_s.expect("output back to the TPS");
+    assert!(back > 30.0 && back < 30.0 + heal + 1.0, "back at {back}");
 }

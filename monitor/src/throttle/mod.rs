@@ -547,6 +547,11 @@ impl ThrottleMonitor {
     /// applied voltage should have moved the plate: its static map spanned more than
     /// `driven_range_deg`, or holds the plate that far from the TPS angle.
     fn static_while_driven(&self) -> bool {
+        // A TPS at a rail (an open or shorted line reads like a plate at its stop) is left to
+        // the circuit checks.
+        if !(self.last_tps > self.cfg.rail_low_v && self.last_tps < self.cfg.rail_high_v) {
+            return false;
+        }
         let static_tps =
             self.tps_hist.full() && self.tps_hist.span() < self.cfg.static_tps_range_deg;
         let away = match (self.eq_hist.last(), self.tps_hist.last()) {
