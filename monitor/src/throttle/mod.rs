@@ -298,10 +298,22 @@ impl ThrottleMonitor {
             ("noise_time_constant_s", cfg.noise_time_constant_s),
             ("fallback_r_scale", cfg.fallback_r_scale),
             ("plate_persist_s", cfg.plate_persist_s),
+            ("watt_confirm_s", cfg.watt_confirm_s),
         ] {
             if !(v > 0.0 && v.is_finite()) {
                 return Err(setting(key, format!("{v} must be a positive number")));
             }
+        }
+        for (key, v) in [
+            ("watt_model_error_w", cfg.watt_model_error_w),
+            ("noise_settle_s", cfg.noise_settle_s),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(setting(key, format!("{v} must be a non-negative number")));
+            }
+        }
+        if cfg.watt_confirm_alarms == 0 {
+            return Err(setting("watt_confirm_alarms", "must be at least 1"));
         }
         if !(cfg.rail_low_v < cfg.rail_high_v) {
             return Err(setting("rail_low_v", "must be below rail_high_v"));
@@ -959,7 +971,11 @@ impl Monitor for ThrottleMonitor {
         // Residuals within the model-error allowance are no evidence of a wattmeter fault (a dead
         // band in innovation units: wide when the wattmeter is quiet, narrow when it is noisy).
         let band = self.cfg.watt_model_error_w / sigma_w;
-        let z_w = z_w - z_w.clamp(-band, band);
+        let z_w = if z_w.is_finite() && band >= 0.0 {
+            z_w - z_w.clamp(-band, band)
+        } else {
+            f64::NAN
+        };
         let cusum_watt = self
             .cusum_watt
             .step(z_w.clamp(-clip, clip), z_w.is_finite());
