@@ -3,6 +3,7 @@
 //! The filters, models and simulators live in the workspace crates (`fdd-estimators`,
 //! `fdd-fixtures`, ...); this crate wires them to files and commands.
 
+pub mod calibrate;
 pub mod config;
 pub mod evaluate;
 pub mod replay;

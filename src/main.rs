@@ -90,6 +90,27 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Calibrate the throttle monitor on fault-free logs of one plant: its sensors' noise
+    /// levels and every residual test's threshold for a false-alarm rate (extreme-value fit to
+    /// block maxima). Writes DIR/fdd.toml and DIR/throttle.toml for `fdd replay --config
+    /// DIR/fdd.toml`. Refuses logs with a fault in them, or too short for the rate asked.
+    Calibrate {
+        /// Fault-free logs, scenario files or directories.
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// Directory to write the calibrated configuration to.
+        #[arg(short, long)]
+        out: PathBuf,
+        /// Runtime configuration to start from (default: the embedded config/fdd.toml).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// False alarms per hour of each test.
+        #[arg(long, default_value_t = 1e-3)]
+        false_alarms_per_hour: f64,
+        /// Length of the blocks whose maxima are fitted (s).
+        #[arg(long, default_value_t = 10.0)]
+        block_s: f64,
+    },
     /// Reproduce a result from one of the source papers.
     Reproduce {
         #[command(subcommand)]
@@ -239,6 +260,35 @@ fn run(command: Command) -> Result<()> {
             } else {
                 emit(&summary.render())
             }
+        }
+        Command::Calibrate {
+            inputs,
+            out,
+            config,
+            false_alarms_per_hour,
+            block_s,
+        } => {
+            if !(false_alarms_per_hour > 0.0 && false_alarms_per_hour.is_finite()) {
+                anyhow::bail!(
+                    "--false-alarms-per-hour {false_alarms_per_hour}: must be a positive number"
+                );
+            }
+            if !(block_s > 0.0 && block_s.is_finite()) {
+                anyhow::bail!("--block-s {block_s}: must be a positive number of seconds");
+            }
+            let cfg = RuntimeConfig::load(config.as_deref())?;
+            let opts = fdd::calibrate::CalibrateOptions {
+                false_alarms_per_hour,
+                block_s,
+            };
+            let cal = fdd::calibrate::calibrate(&inputs, &cfg, &opts)?;
+            let written = cal.write(&out)?;
+            emit(&format!(
+                "{}wrote {} (use: fdd replay --config {} LOG)\n",
+                cal.render(&opts),
+                written.display(),
+                written.display()
+            ))
         }
         Command::Simulate {
             scenario,

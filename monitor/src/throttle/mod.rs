@@ -527,12 +527,29 @@ impl ThrottleMonitor {
 
     /// Puts the noise estimates into the filters' `R` every [`NOISE_UPDATE_STEPS`] steps once
     /// settled (a new `R` is checked for definiteness: not worth doing every step).
-    fn apply_noise_levels(&mut self) {
+    /// The learned levels (unbounded, standard deviations) go out as the estimates
+    /// `tps_noise_std_v` (V) and `wattmeter_noise_std_w` (W), which `fdd calibrate` reads.
+    fn apply_noise_levels(&mut self, out: &mut OutputSink<'_>) {
         self.noise_steps += 1;
         if self.noise_steps < NOISE_UPDATE_STEPS {
             return;
         }
         self.noise_steps = 0;
+        for (name, est) in [
+            ("tps_noise_std_v", &self.tps_noise),
+            ("wattmeter_noise_std_w", &self.watt_noise),
+        ] {
+            if est.settled() {
+                let v = est.unbounded().sqrt();
+                out(Output::Estimate {
+                    name,
+                    value: v,
+                    lower: v,
+                    upper: v,
+                    source: "online_estimate",
+                });
+            }
+        }
         let rt = self.tps_noise.variance();
         let scale = if self.tps_fault.is_some() {
             self.cfg.fallback_r_scale
@@ -941,7 +958,7 @@ impl Monitor for ThrottleMonitor {
         if !watt_fed {
             self.watt_noise.gap();
         }
-        self.apply_noise_levels();
+        self.apply_noise_levels(out);
         // The wattmeter test waits for its noise level: judged against the configured level,
         // a noisier wattmeter would fail it at once.
         if !self.watt_noise.settled() {

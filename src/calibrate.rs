@@ -1,0 +1,576 @@
+//! `fdd calibrate`: from fault-free logs of one plant, what the throttle monitor assumes: its
+//! sensors' noise levels and every residual test's threshold for a stated false-alarm rate,
+//! written as a configuration that `fdd replay --config` uses.
+//!
+//! Method (a client of the runtime, like `replay`):
+//!
+//! 1. Every log is replayed with the monitor's thresholds out of reach (nothing fails, nothing
+//!    is decided, so every step is a fault-free sample of every test statistic) and wide noise
+//!    bounds. The monitor's online noise estimates (`tps_noise_std_v`,
+//!    `wattmeter_noise_std_w`, see `fdd_estimators::NoiseLevel`) at the end of each log give
+//!    the noise levels (the median over the logs).
+//! 2. A second pass runs with those noise levels. Each test's statistic is cut into blocks of
+//!    `block_s` seconds; a generalized extreme-value law is fitted to the block maxima by
+//!    L-moments ([`fdd_diagnostics::extreme_value::GevFit`]: a CUSUM fed by model error that
+//!    comes and goes has a heavier tail than Gumbel's) and the threshold is the value a block maximum
+//!    exceeds with probability `rate * block_s / 3600`: it extrapolates beyond the largest
+//!    value seen.
+//! 3. **Refusals.** A log whose ground truth says a fault is active; fewer than 20 blocks of a
+//!    statistic; a rate asking to extrapolate more than [`MAX_EXTRAPOLATION`] times the data's
+//!    length; block maxima that do not follow the law (probability-plot correlation below
+//!    [`MIN_PPCC`]), or one above the threshold it gives (the data would alarm at the rate
+//!    asked): each says which test, log and time.
+
+use std::path::{Path, PathBuf};
+
+use fdd_diagnostics::extreme_value::{FitError, GevFit};
+use fdd_diagnostics::Verdict;
+use fdd_monitor::monitor::Output;
+use fdd_monitor::runtime::config::TruthConfig;
+use fdd_monitor::runtime::Runtime;
+
+use crate::evaluate::expand_inputs;
+use crate::replay::{replay_observed, ReplayObserver, ReplayOptions, RuntimeConfig};
+
+/// Smallest probability-plot correlation of a fit that is accepted.
+pub const MIN_PPCC: f64 = 0.95;
+/// Largest ratio of the return period asked (`1 / rate`) to the data's length.
+pub const MAX_EXTRAPOLATION: f64 = 1e4;
+/// Thresholds of the calibration runs: out of reach of any fault-free statistic, finite (the
+/// CUSUMs' run-length solution needs it).
+const UNREACHABLE_CUSUM: f64 = 400.0;
+const UNREACHABLE_NIS: f64 = 1e12;
+
+/// Time constant of the low-pass that separates the wattmeter residual's slowly varying part
+/// (model error) from its noise (s).
+const MODEL_ERROR_TAU_S: f64 = 0.1;
+
+/// The throttle tests calibrated: (test output name, `[monitor]` key).
+const TESTS: [(&str, &str); 3] = [
+    ("tps_nis_window", "tps_nis_threshold"),
+    ("tps_cusum", "tps_cusum_threshold"),
+    ("wattmeter_cusum", "watt_cusum_threshold"),
+];
+
+/// Why a calibration was refused or could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrateError {
+    #[error(transparent)]
+    Evaluate(#[from] crate::evaluate::EvaluateError),
+    #[error(transparent)]
+    Replay(#[from] crate::replay::ReplayError),
+    #[error(transparent)]
+    Config(#[from] fdd_monitor::config::ConfigError),
+    #[error("{}: not fault-free: the ground truth has `{fault}` active at {t_s:.3} s", file.display())]
+    FaultInLog {
+        file: PathBuf,
+        fault: String,
+        t_s: f64,
+    },
+    #[error("no throttle data in the logs (the throttle monitor produced no `{0}` statistic)")]
+    NoData(&'static str),
+    #[error("test `{test}`: {source} ({hours:.2} h of data in blocks of {block_s} s); give longer or more logs")]
+    TooShort {
+        test: &'static str,
+        hours: f64,
+        block_s: f64,
+        #[source]
+        source: FitError,
+    },
+    #[error("{rate} false alarms per hour asks to extrapolate {ratio:.0} times beyond {hours:.2} h of data (at most {MAX_EXTRAPOLATION:.0}); give longer logs or a higher rate")]
+    Extrapolation { rate: f64, hours: f64, ratio: f64 },
+    #[error("test `{test}`: the block maxima do not follow an extreme-value law (probability-plot correlation {ppcc:.3} < {MIN_PPCC}); the largest, {max:.4} in {} at {t_s:.1} s, suggests a fault or a change of plant in the data", file.display())]
+    BadFit {
+        test: &'static str,
+        ppcc: f64,
+        max: f64,
+        file: PathBuf,
+        t_s: f64,
+    },
+    #[error("test `{test}`: the data exceed the threshold they give ({max:.4} > {threshold:.4} in {} at {t_s:.1} s): not fault-free enough for {rate} false alarms per hour", file.display())]
+    Exceeds {
+        test: &'static str,
+        max: f64,
+        threshold: f64,
+        file: PathBuf,
+        t_s: f64,
+        rate: f64,
+    },
+    #[error("{}: cannot write: {source}", file.display())]
+    Write {
+        file: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{origin}: {message}")]
+    Toml { origin: String, message: String },
+}
+
+/// What `fdd calibrate` asks for.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrateOptions {
+    /// False alarms per hour of each test (default 1e-3).
+    pub false_alarms_per_hour: f64,
+    /// Block length of the block maxima (s).
+    pub block_s: f64,
+}
+
+impl Default for CalibrateOptions {
+    fn default() -> Self {
+        Self {
+            false_alarms_per_hour: 1e-3,
+            block_s: 10.0,
+        }
+    }
+}
+
+/// One test's calibration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TestCalibration {
+    pub test: &'static str,
+    pub key: &'static str,
+    pub fit: GevFit,
+    /// Largest value seen, and the threshold set.
+    pub max: f64,
+    pub threshold: f64,
+}
+
+/// The result: the levels and thresholds, and the configuration text to write.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    pub logs: Vec<PathBuf>,
+    pub hours: f64,
+    pub tps_noise_v: f64,
+    pub wattmeter_noise_w: f64,
+    /// The wattmeter test's model-error dead band (W).
+    pub watt_model_error_w: f64,
+    pub tests: Vec<TestCalibration>,
+    /// `throttle.toml` and `fdd.toml` texts.
+    pub throttle_toml: String,
+    pub runtime_toml: String,
+}
+
+/// Statistics of one replay pass.
+#[derive(Default)]
+struct Collector {
+    file: PathBuf,
+    block_ns: u64,
+    /// Per test: block maxima with their log and start time.
+    maxima: [Vec<(f64, usize, f64)>; 3],
+    current: [Option<(u64, f64)>; 3],
+    log_index: usize,
+    noise: (f64, f64),
+    /// Low-passed wattmeter innovation (W, time constant [`MODEL_ERROR_TAU_S`]), the block's
+    /// largest magnitude of it, and those block maxima: the model error's size.
+    watt_lp: f64,
+    watt_lp_block: Option<(u64, f64)>,
+    watt_lp_maxima: Vec<f64>,
+    fault: Option<(String, f64)>,
+    first_ns: Option<u64>,
+    last_ns: u64,
+    total_ns: u64,
+}
+
+impl Collector {
+    fn flush(&mut self) {
+        for (i, c) in self.current.iter_mut().enumerate() {
+            if let Some((start, m)) = c.take() {
+                self.maxima[i].push((m, self.log_index, start as f64 * 1e-9));
+            }
+        }
+    }
+}
+
+impl ReplayObserver for Collector {
+    fn begin_log(&mut self, _rt: &Runtime, _truths: &[TruthConfig]) {
+        self.current = [None; 3];
+        self.watt_lp = 0.0;
+        self.watt_lp_block = None;
+        self.noise = (f64::NAN, f64::NAN);
+        self.first_ns = None;
+    }
+
+    fn output(&mut self, t_ns: u64, monitor: &str, output: &Output<'_>) {
+        if monitor != "throttle" {
+            return;
+        }
+        self.first_ns.get_or_insert(t_ns);
+        self.last_ns = self.last_ns.max(t_ns);
+        match *output {
+            Output::Test { test, result } if result.verdict != Verdict::NotTested => {
+                let Some(i) = TESTS.iter().position(|(t, _)| *t == test) else {
+                    return;
+                };
+                if !result.value.is_finite() {
+                    return;
+                }
+                match &mut self.current[i] {
+                    Some((start, m)) if t_ns < *start + self.block_ns => *m = m.max(result.value),
+                    slot => {
+                        // Only whole blocks count: a block ends when the next one starts.
+                        if let Some((start, m)) = slot.take() {
+                            self.maxima[i].push((m, self.log_index, start as f64 * 1e-9));
+                        }
+                        *slot = Some((t_ns, result.value));
+                    }
+                }
+            }
+            Output::Innovation {
+                filter: "combined",
+                residual,
+                ..
+            } if residual.len() == 2 && residual[1].is_finite() && residual[1] != 0.0 => {
+                let alpha = 1e-3 / MODEL_ERROR_TAU_S;
+                self.watt_lp += alpha * (residual[1] - self.watt_lp);
+                let v = self.watt_lp.abs();
+                match &mut self.watt_lp_block {
+                    Some((start, m)) if t_ns < *start + self.block_ns => *m = m.max(v),
+                    slot => {
+                        if let Some((_, m)) = slot.take() {
+                            self.watt_lp_maxima.push(m);
+                        }
+                        *slot = Some((t_ns, v));
+                    }
+                }
+            }
+            Output::Estimate { name, value, .. } => match name {
+                "tps_noise_std_v" => self.noise.0 = value,
+                "wattmeter_noise_std_w" => self.noise.1 = value,
+                _ => {}
+            },
+            _ => {}
+        }
+    }
+
+    fn truth(&mut self, t_ns: u64, _index: usize, fault: &str, active: bool, _o: Option<bool>) {
+        if active && self.fault.is_none() {
+            self.fault = Some((fault.to_string(), t_ns as f64 * 1e-9));
+        }
+    }
+
+    fn end_log(&mut self) {
+        // The last, partial block is dropped.
+        self.current = [None; 3];
+        if let Some(a) = self.first_ns {
+            self.total_ns += self.last_ns.saturating_sub(a);
+        }
+        self.last_ns = 0;
+    }
+}
+
+/// Sets `[monitor]` keys in a throttle configuration text (comments kept).
+fn with_monitor_keys(
+    text: &str,
+    origin: &str,
+    keys: &[(&str, f64)],
+) -> Result<String, CalibrateError> {
+    let mut doc: toml_edit::DocumentMut =
+        text.parse()
+            .map_err(|e: toml_edit::TomlError| CalibrateError::Toml {
+                origin: origin.to_string(),
+                message: e.to_string(),
+            })?;
+    if doc.get("monitor").is_none() {
+        doc["monitor"] = toml_edit::table();
+    }
+    for (k, v) in keys {
+        doc["monitor"][*k] = toml_edit::value(*v);
+    }
+    Ok(doc.to_string())
+}
+
+/// Runs every log through the runtime of `cfg` with `collector`.
+fn pass(logs: &[PathBuf], cfg: &RuntimeConfig, block_s: f64) -> Result<Collector, CalibrateError> {
+    let mut c = Collector {
+        block_ns: (block_s * 1e9) as u64,
+        ..Collector::default()
+    };
+    for (i, file) in logs.iter().enumerate() {
+        c.log_index = i;
+        c.file = file.clone();
+        c.fault = None;
+        let opts = ReplayOptions::default();
+        if file.extension().and_then(|e| e.to_str()) == Some("toml") {
+            let tmp = tempfile::Builder::new()
+                .prefix("fdd-calibrate-")
+                .suffix(".mcap")
+                .tempfile()
+                .map_err(crate::evaluate::EvaluateError::Temp)?;
+            crate::simulate::simulate(&file.to_string_lossy(), tmp.path()).map_err(|source| {
+                crate::evaluate::EvaluateError::Simulate {
+                    file: file.clone(),
+                    source: Box::new(source),
+                }
+            })?;
+            replay_observed(tmp.path(), cfg, &opts, &mut c)?;
+        } else {
+            replay_observed(file, cfg, &opts, &mut c)?;
+        }
+        c.flush();
+        if let Some((fault, t_s)) = c.fault.take() {
+            return Err(CalibrateError::FaultInLog {
+                file: file.clone(),
+                fault,
+                t_s,
+            });
+        }
+    }
+    Ok(c)
+}
+
+/// A runtime configuration whose throttle monitor reads `throttle_text` (written to `dir`).
+fn runtime_with(
+    base: &RuntimeConfig,
+    dir: &Path,
+    throttle_text: &str,
+) -> Result<RuntimeConfig, CalibrateError> {
+    let path = dir.join("throttle.toml");
+    std::fs::write(&path, throttle_text).map_err(|source| CalibrateError::Write {
+        file: path.clone(),
+        source,
+    })?;
+    let mut cfg = base.clone();
+    cfg.monitors.throttle = true;
+    cfg.monitors.intake = false;
+    cfg.monitors.throttle_config = Some(path);
+    Ok(cfg)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.retain(|x| x.is_finite());
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v[v.len() / 2]
+    }
+}
+
+/// Calibrates the throttle monitor of `base` on `inputs` (see the [module documentation](self)).
+pub fn calibrate(
+    inputs: &[PathBuf],
+    base: &RuntimeConfig,
+    opts: &CalibrateOptions,
+) -> Result<Calibration, CalibrateError> {
+    let logs = expand_inputs(inputs)?;
+    let (throttle_text, throttle_origin) = match &base.monitors.throttle_config {
+        Some(p) => (
+            std::fs::read_to_string(p).map_err(|source| CalibrateError::Write {
+                file: p.clone(),
+                source,
+            })?,
+            p.display().to_string(),
+        ),
+        None => (
+            fdd_monitor::config::DEFAULT_THROTTLE_TOML.to_string(),
+            "config/throttle.toml".to_string(),
+        ),
+    };
+    let work = tempfile::tempdir().map_err(crate::evaluate::EvaluateError::Temp)?;
+    let unreachable = [
+        ("tps_nis_threshold", UNREACHABLE_NIS),
+        ("tps_cusum_threshold", UNREACHABLE_CUSUM),
+        ("watt_cusum_threshold", UNREACHABLE_CUSUM),
+    ];
+
+    // Pass 1: the noise levels, with wide bounds.
+    let mut keys: Vec<(&str, f64)> = unreachable.to_vec();
+    keys.extend([
+        ("tps_noise_min_v", 1e-4),
+        ("tps_noise_max_v", 1.0),
+        ("wattmeter_noise_min_w", 1e-3),
+        ("wattmeter_noise_max_w", 10.0),
+    ]);
+    let text = with_monitor_keys(&throttle_text, &throttle_origin, &keys)?;
+    let cfg = runtime_with(base, work.path(), &text)?;
+    // The per-log levels: the collector keeps the last of each log.
+    let mut tps_levels = Vec::new();
+    let mut watt_levels = Vec::new();
+    let mut model_error = Vec::new();
+    for log in &logs {
+        let c = pass(std::slice::from_ref(log), &cfg, opts.block_s)?;
+        tps_levels.push(c.noise.0);
+        watt_levels.push(c.noise.1);
+        model_error.extend(c.watt_lp_maxima);
+    }
+    // The dead band of the wattmeter test: the 90th percentile of the blocks' largest
+    // low-passed residual (what model error alone reaches in most blocks).
+    model_error.sort_by(f64::total_cmp);
+    let watt_model_error_w = model_error
+        .get(model_error.len() * 9 / 10)
+        .copied()
+        .unwrap_or(f64::NAN);
+    let tps_noise_v = median(tps_levels);
+    let wattmeter_noise_w = median(watt_levels);
+    if !(tps_noise_v.is_finite() && wattmeter_noise_w.is_finite() && watt_model_error_w.is_finite())
+    {
+        return Err(CalibrateError::NoData("tps_noise_std_v"));
+    }
+
+    // Pass 2: the statistics at those levels (bounds around them, as the calibrated
+    // configuration will have).
+    let noise_keys = [
+        ("tps_noise_v", tps_noise_v),
+        ("tps_noise_min_v", tps_noise_v),
+        ("tps_noise_max_v", 3.0 * tps_noise_v),
+        ("wattmeter_noise_w", wattmeter_noise_w),
+        ("wattmeter_noise_min_w", 0.5 * wattmeter_noise_w),
+        ("wattmeter_noise_max_w", 3.0 * wattmeter_noise_w),
+        ("watt_model_error_w", watt_model_error_w),
+    ];
+    let mut keys: Vec<(&str, f64)> = unreachable.to_vec();
+    keys.extend(noise_keys);
+    let text = with_monitor_keys(&throttle_text, &throttle_origin, &keys)?;
+    let cfg = runtime_with(base, work.path(), &text)?;
+    let c = pass(&logs, &cfg, opts.block_s)?;
+    let hours = c.total_ns as f64 * 1e-9 / 3600.0;
+    let ratio = 1.0 / (opts.false_alarms_per_hour * hours);
+    if !(ratio <= MAX_EXTRAPOLATION) {
+        return Err(CalibrateError::Extrapolation {
+            rate: opts.false_alarms_per_hour,
+            hours,
+            ratio,
+        });
+    }
+    let mut tests = Vec::new();
+    for (i, (test, key)) in TESTS.iter().enumerate() {
+        let maxima = &c.maxima[i];
+        if maxima.is_empty() {
+            return Err(CalibrateError::NoData(test));
+        }
+        let values: Vec<f64> = maxima.iter().map(|m| m.0).collect();
+        let fit = GevFit::fit(&values).map_err(|source| CalibrateError::TooShort {
+            test,
+            hours,
+            block_s: opts.block_s,
+            source,
+        })?;
+        let (max, log, t_s) = maxima
+            .iter()
+            .copied()
+            .max_by(|a, b| a.0.total_cmp(&b.0))
+            .unwrap_or((f64::NAN, 0, f64::NAN));
+        let file = logs.get(log).cloned().unwrap_or_default();
+        if !(fit.ppcc >= MIN_PPCC) {
+            return Err(CalibrateError::BadFit {
+                test,
+                ppcc: fit.ppcc,
+                max,
+                file,
+                t_s,
+            });
+        }
+        let threshold = fit.threshold(opts.false_alarms_per_hour, opts.block_s);
+        if max > threshold {
+            return Err(CalibrateError::Exceeds {
+                test,
+                max,
+                threshold,
+                file,
+                t_s,
+                rate: opts.false_alarms_per_hour,
+            });
+        }
+        tests.push(TestCalibration {
+            test,
+            key,
+            fit,
+            max,
+            threshold,
+        });
+    }
+    let mut keys: Vec<(&str, f64)> = noise_keys.to_vec();
+    keys.extend(tests.iter().map(|t| (t.key, t.threshold)));
+    let throttle_toml = with_monitor_keys(&throttle_text, &throttle_origin, &keys)?;
+    let runtime_text = match base.origin.as_str() {
+        o if Path::new(o).is_file() => {
+            std::fs::read_to_string(o).map_err(|source| CalibrateError::Write {
+                file: o.into(),
+                source,
+            })?
+        }
+        _ => fdd_monitor::runtime::config::DEFAULT_RUNTIME_TOML.to_string(),
+    };
+    let mut doc: toml_edit::DocumentMut =
+        runtime_text
+            .parse()
+            .map_err(|e: toml_edit::TomlError| CalibrateError::Toml {
+                origin: base.origin.clone(),
+                message: e.to_string(),
+            })?;
+    if doc.get("monitors").is_none() {
+        doc["monitors"] = toml_edit::table();
+    }
+    doc["monitors"]["throttle_config"] = toml_edit::value("throttle.toml");
+    Ok(Calibration {
+        logs,
+        hours,
+        tps_noise_v,
+        wattmeter_noise_w,
+        watt_model_error_w,
+        tests,
+        throttle_toml,
+        runtime_toml: doc.to_string(),
+    })
+}
+
+impl Calibration {
+    /// Writes `dir/fdd.toml` (the runtime configuration, naming `throttle.toml` beside it) and
+    /// `dir/throttle.toml`.
+    pub fn write(&self, dir: &Path) -> Result<PathBuf, CalibrateError> {
+        std::fs::create_dir_all(dir).map_err(|source| CalibrateError::Write {
+            file: dir.to_path_buf(),
+            source,
+        })?;
+        for (name, text) in [
+            ("throttle.toml", &self.throttle_toml),
+            ("fdd.toml", &self.runtime_toml),
+        ] {
+            let p = dir.join(name);
+            std::fs::write(&p, text).map_err(|source| CalibrateError::Write { file: p, source })?;
+        }
+        Ok(dir.join("fdd.toml"))
+    }
+
+    /// The report `fdd calibrate` prints.
+    pub fn render(&self, opts: &CalibrateOptions) -> String {
+        use std::fmt::Write as _;
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "{} logs, {:.2} h; blocks of {} s; {} false alarms per hour per test",
+            self.logs.len(),
+            self.hours,
+            opts.block_s,
+            opts.false_alarms_per_hour
+        );
+        let _ = writeln!(
+            s,
+            "noise: TPS {:.2} mV, wattmeter {:.3} W (std, online estimate, median over the logs); wattmeter model error {:.3} W",
+            1e3 * self.tps_noise_v,
+            self.wattmeter_noise_w,
+            self.watt_model_error_w
+        );
+        let _ = writeln!(
+            s,
+            "{:<16} {:>6} {:>10} {:>10} {:>7} {:>6} {:>10} {:>10}   key",
+            "test", "blocks", "location", "scale", "shape", "PPCC", "max seen", "threshold"
+        );
+        for t in &self.tests {
+            let _ = writeln!(
+                s,
+                "{:<16} {:>6} {:>10.4} {:>10.4} {:>7.3} {:>6.3} {:>10.4} {:>10.4}   {}",
+                t.test,
+                t.fit.blocks,
+                t.fit.location,
+                t.fit.scale,
+                t.fit.shape,
+                t.fit.ppcc,
+                t.max,
+                t.threshold,
+                t.key
+            );
+        }
+        s
+    }
+}
