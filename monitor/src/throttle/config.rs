@@ -62,6 +62,14 @@ pub struct ThrottleMonitorConfig {
     /// CUSUM on the TPS filter's normalized innovation: smallest bias (sigma) and threshold.
     pub tps_cusum_min_bias_sigma: f64,
     pub tps_cusum_threshold: f64,
+    /// TPS innovations within +-this (V) count as the sensor's calibration tolerance and model
+    /// error, not as evidence of a TPS fault (a dead band before its CUSUM): a TPS 1 % off in
+    /// gain or 20 mV off in offset is a healthy part.
+    pub tps_tolerance_v: f64,
+    /// A TPS may lag the plate by up to this (s; an RC input filter): the TPS tests add
+    /// `(lag * predicted TPS rate)^2` to the innovation variance, so a fast move read a
+    /// millisecond late is not a jump.
+    pub tps_lag_tolerance_s: f64,
     /// CUSUM on the combined filter's wattmeter innovation.
     pub watt_cusum_min_bias_sigma: f64,
     pub watt_cusum_threshold: f64,
@@ -138,6 +146,8 @@ impl Default for ThrottleMonitorConfig {
             tps_cusum_threshold: 40.0,
             watt_cusum_min_bias_sigma: 0.5,
             watt_cusum_threshold: 35.0,
+            tps_tolerance_v: 0.0,
+            tps_lag_tolerance_s: 0.0,
             watt_model_error_w: 0.05,
             watt_confirm_alarms: 3,
             watt_confirm_s: 2.0,

@@ -259,6 +259,8 @@ pub struct ThrottleMonitor {
     tps_noise: NoiseLevel,
     watt_noise: NoiseLevel,
     noise_steps: u32,
+    /// The TPS filter's angle after its previous update (deg), for the predicted rate.
+    last_theta_pred: f64,
     /// Steps in a row the plate has been static while driven, and how many make it stuck.
     static_run: u32,
     plate_persist: u32,
@@ -306,6 +308,8 @@ impl ThrottleMonitor {
         }
         for (key, v) in [
             ("watt_model_error_w", cfg.watt_model_error_w),
+            ("tps_tolerance_v", cfg.tps_tolerance_v),
+            ("tps_lag_tolerance_s", cfg.tps_lag_tolerance_s),
             ("noise_settle_s", cfg.noise_settle_s),
         ] {
             if !(v >= 0.0 && v.is_finite()) {
@@ -455,6 +459,7 @@ impl ThrottleMonitor {
             plate_fault: None,
             heal_run: [0; 3],
             heal_steps: ((cfg.heal_s / cfg.period_s).round() as u32).max(1),
+            last_theta_pred: f64::NAN,
             tps_noise,
             watt_noise,
             noise_steps: 0,
@@ -515,6 +520,7 @@ impl ThrottleMonitor {
         self.heal_run = [0; 3];
         self.static_run = 0;
         self.tps_noise.reset();
+        self.last_theta_pred = f64::NAN;
         self.watt_noise.reset();
         self.noise_steps = 0;
         self.end_episode();
@@ -893,6 +899,8 @@ impl Monitor for ThrottleMonitor {
             && self.plate_fault.is_none();
         let mut nis_t = f64::NAN;
         let mut z_t = f64::NAN;
+        // The TPS innovation's standard deviation (V), for the tolerance dead band.
+        let mut sigma_t = f64::NAN;
         let mut tps_fed = false;
         if let (true, Some(v)) = (tps_usable, tps) {
             // Readings at the ADC's ends are clipped, not noisy: they say nothing of the noise.
@@ -900,9 +908,25 @@ impl Monitor for ThrottleMonitor {
                 self.tps_noise.push(v);
                 tps_fed = true;
             }
+            // The predicted TPS rate (V/s): a sensor that lags the plate by up to
+            // `tps_lag_tolerance_s` misses it by up to that rate times the lag, which the tests
+            // allow for on top of the innovation variance.
+            // The model's motion over the step: this prediction from the previous update (an
+            // update's own jump, e.g. at a bias's onset, is not motion).
+            let theta = self.model.angle_deg(self.tps_ukf.state());
+            let rate_v = (theta - self.last_theta_pred) * self.volts_per_deg / self.cfg.period_s;
+            let lag = if rate_v.is_finite() {
+                (self.cfg.tps_lag_tolerance_s * rate_v).powi(2)
+            } else {
+                0.0
+            };
             if let Ok(inn) = self.tps_ukf.update(&Vector1::new(v), &uu) {
-                nis_t = inn.nis;
-                z_t = inn.normalized(0);
+                let s_eff = inn.covariance[(0, 0)] + lag;
+                let r = inn.residual[0];
+                nis_t = r * r / s_eff;
+                sigma_t = s_eff.sqrt();
+                z_t = r / sigma_t;
+                self.last_theta_pred = self.model.angle_deg(self.tps_ukf.state());
                 out(Output::Innovation {
                     filter: "tps",
                     residual: inn.residual.as_slice(),
@@ -983,6 +1007,14 @@ impl Monitor for ThrottleMonitor {
             }
         } else {
             TestResult::NOT_TESTED
+        };
+        // A TPS within its calibration tolerance of the model is no evidence of a fault (a dead
+        // band, as for the wattmeter below).
+        let band_t = self.cfg.tps_tolerance_v / sigma_t;
+        let z_t = if z_t.is_finite() && band_t >= 0.0 {
+            z_t - z_t.clamp(-band_t, band_t)
+        } else {
+            f64::NAN
         };
         let cusum_tps = self.cusum_tps.step(z_t.clamp(-clip, clip), z_t.is_finite());
         // Residuals within the model-error allowance are no evidence of a wattmeter fault (a dead
