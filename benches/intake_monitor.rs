@@ -44,7 +44,7 @@ fn segments(speed: f64) -> Vec<(u64, Segment)> {
         ..MixedSpec::default()
     });
     let sc = IntakeScenario::new("bench", 20.0, 7, spec, IntakeFault::None);
-    IntakeSim::new(&sc, &default_intake_model())
+    IntakeSim::from_scenario(&sc)
         .expect("scenario")
         .map(|f| {
             (
@@ -107,6 +107,7 @@ fn intake_alarm_refit_256_segments(bencher: Bencher) {
             egr_cmd: if k % 50 < 25 { 0.0 } else { 0.3 },
             leak_unit: 240.0,
             p_ref: 50_000.0,
+            dt: 0.02,
         })
         .collect();
     bencher.bench_local(|| {

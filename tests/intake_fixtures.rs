@@ -3,9 +3,11 @@
 //! nominal drive.
 //!
 //! For every fault fixture: the fault is detected (a residual test fails) within 2 s of driving
-//! in which it is observable (the truth's `fault_observable`), the DTC raised is the injected
-//! fault's and no other, and the top-ranked isolation candidate is the injected fault. The
-//! nominal fixture and a generated 30-minute drive raise nothing.
+//! in which it is observable (the truth's `fault_observable`), the specific DTC raised is the
+//! injected fault's and no other (the group DTC `intake_air_path_group` may come first, while
+//! isolation is still deciding), and the top-ranked isolation candidate of the specific DTC is
+//! the injected fault. The nominal fixture and a generated 30-minute drive raise nothing. The
+//! in-memory simulations run the truth simulator's own plant ([`IntakeSim::from_scenario`]).
 //!
 //! `cargo test --release --test intake_fixtures -- --nocapture` prints the measured delays.
 
@@ -15,7 +17,11 @@ use fdd_diagnostics::dtc::StatusBit;
 use fdd_diagnostics::Verdict;
 use fdd_fixtures::intake_profile::{MixedSpec, ProfileSpec, TipInOutSpec};
 use fdd_fixtures::intake_sim::{default_intake_model, IntakeFault, IntakeScenario, IntakeSim};
-use fdd_monitor::intake::{IntakeDecision, IntakeMonitor, IntakeMonitorConfig, Segment};
+// `default_intake_model` is the *monitor's* model (config/intake.toml); the truth is the
+// simulator's plant (fixtures/plants/intake.toml) through `IntakeSim::from_scenario`.
+use fdd_monitor::intake::{
+    IntakeDecision, IntakeMonitor, IntakeMonitorConfig, Segment, GROUP_EVENT,
+};
 use fdd_monitor::log::LogReader;
 use fdd_monitor::monitor::{Monitor, Output};
 use fdd_monitor::signal_table::{SignalSpec, SignalTable};
@@ -40,8 +46,10 @@ struct Outcome {
     decision: Option<IntakeDecision>,
     /// Events whose testFailed bit was raised.
     raised: Vec<String>,
-    /// Top-ranked candidate of the decision's event (from the DTC's DiagnosticEvent).
+    /// Top-ranked candidate of the first specific DTC (from the DTC's DiagnosticEvent).
     top_candidate: Option<String>,
+    /// The group DTC's candidates, if one was raised.
+    group_candidates: Vec<String>,
     /// Observable driving time after the onset, over the whole run (s).
     observable_s: f64,
 }
@@ -91,6 +99,7 @@ fn run(frames: impl Iterator<Item = Frame>) -> Outcome {
         let mut failed_residual = false;
         let mut raised = Vec::new();
         let mut top = None;
+        let mut group: Vec<String> = Vec::new();
         mon.process_segment(f.t_ns, &f.seg, &mut |out| match out {
             Output::Test { test, result }
                 if result.verdict == Verdict::Failed && RESIDUAL_TESTS.contains(&test) =>
@@ -101,10 +110,19 @@ fn run(frames: impl Iterator<Item = Frame>) -> Outcome {
                 if ev.bit_changed(StatusBit::TestFailed) && ev.status_after.test_failed() =>
             {
                 raised.push(ev.event.to_string());
-                top = ev.candidates.first().map(|c| c.0.to_string());
+                if ev.event == GROUP_EVENT {
+                    group = ev.candidates.iter().map(|c| c.0.to_string()).collect();
+                } else {
+                    if top.is_none() {
+                        top = ev.candidates.first().map(|c| c.0.to_string());
+                    }
+                }
             }
             _ => {}
         });
+        if o.group_candidates.is_empty() {
+            o.group_candidates = std::mem::take(&mut group);
+        }
         if f.observable {
             observable += IntakeModel::segment_dt(f.seg.speed_rpm);
         }
@@ -189,9 +207,31 @@ const FAULTS: [(&str, &str, &str); 5] = [
     ("intake_leak", "intake_leak", "manifold_leak"),
 ];
 
+/// The specific DTCs raised (the group DTC left out), and whether a group DTC came only before
+/// the first of them.
+fn specific(o: &Outcome) -> (Vec<String>, bool) {
+    let first = o.raised.iter().position(|e| e != GROUP_EVENT);
+    let group_after = o
+        .raised
+        .iter()
+        .enumerate()
+        .any(|(i, e)| e == GROUP_EVENT && first.is_some_and(|f| i > f));
+    (
+        o.raised
+            .iter()
+            .filter(|e| *e != GROUP_EVENT)
+            .cloned()
+            .collect(),
+        !group_after,
+    )
+}
+
 /// Like [`check`], on a random drive: an EGR valve stuck at 0.3 gives too much or too little
 /// flow depending on the commands it meets, so either EGR DTC is right; a fault observable for
-/// less than 2 s need not be found.
+/// less than 2 s need not be found. The detection bound is 3 s of observable driving here (2 s
+/// before the monitor allowed for model error): a valve stuck 0.05..0.1 from a part-load
+/// command counts as observable but stays within the residuals' model-error allowance, and
+/// the random drives meet such commands first.
 fn check_random_drive(label: &str, o: &Outcome, events: &[&str], candidate: &str) {
     println!(
         "{label:28} observable {:>6.2} s, detected after {:>6} s observable, DTC {:22} after {:>6} s observable, top candidate {}",
@@ -201,21 +241,30 @@ fn check_random_drive(label: &str, o: &Outcome, events: &[&str], candidate: &str
         o.decided_after_s.map_or("-".into(), |v| format!("{v:.3}")),
         o.top_candidate.as_deref().unwrap_or("-"),
     );
+    let (spec, group_first) = specific(o);
     if o.observable_s < 2.0 {
-        assert!(o.raised.len() <= 1, "{label}: {:?}", o.raised);
+        assert!(spec.len() <= 1, "{label}: {:?}", o.raised);
         return;
     }
     let det = o
         .detected_after_s
         .unwrap_or_else(|| panic!("{label}: not detected"));
-    assert!(det <= 2.0, "{label}: detected after {det:.3} s observable");
-    assert_eq!(o.raised.len(), 1, "{label}: DTCs raised {:?}", o.raised);
+    assert!(det <= 3.0, "{label}: detected after {det:.3} s observable");
+    assert_eq!(spec.len(), 1, "{label}: DTCs raised {:?}", o.raised);
+    assert!(group_first, "{label}: {:?}", o.raised);
     assert!(
-        events.contains(&o.raised[0].as_str()),
+        events.contains(&spec[0].as_str()),
         "{label}: {:?}",
         o.raised
     );
     assert_eq!(o.top_candidate.as_deref(), Some(candidate), "{label}");
+    if !o.group_candidates.is_empty() {
+        assert!(
+            o.group_candidates.iter().any(|c| c == candidate),
+            "{label}: group candidates {:?}",
+            o.group_candidates
+        );
+    }
 }
 
 /// The fitted fault size, in words.
@@ -236,7 +285,7 @@ fn fitted(o: &Outcome) -> String {
 
 fn check(label: &str, o: &Outcome, event: &str, candidate: &str) {
     println!(
-        "{label:28} detected after {:>6} s observable, DTC {:22} after {:>6} s observable ({:>6} s from onset), top candidate {} ({})",
+        "{label:28} detected after {:>6} s observable, first DTC {:22} after {:>6} s observable ({:>6} s from onset), top candidate {} ({})",
         o.detected_after_s.map_or("-".into(), |v| format!("{v:.3}")),
         o.raised.first().map_or("none", |s| s.as_str()),
         o.decided_after_s.map_or("-".into(), |v| format!("{v:.3}")),
@@ -248,12 +297,34 @@ fn check(label: &str, o: &Outcome, event: &str, candidate: &str) {
         .detected_after_s
         .unwrap_or_else(|| panic!("{label}: not detected"));
     assert!(det <= 2.0, "{label}: detected after {det:.3} s observable");
-    assert_eq!(o.raised, vec![event.to_string()], "{label}: DTCs raised");
+    let dtc = o
+        .decided_after_s
+        .unwrap_or_else(|| panic!("{label}: no DTC"));
+    assert!(dtc <= 2.0, "{label}: first DTC after {dtc:.3} s observable");
+    let (spec, group_first) = specific(o);
+    assert_eq!(
+        spec,
+        vec![event.to_string()],
+        "{label}: DTCs raised {:?}",
+        o.raised
+    );
+    assert!(
+        group_first,
+        "{label}: group DTC after the specific one: {:?}",
+        o.raised
+    );
     assert_eq!(
         o.top_candidate.as_deref(),
         Some(candidate),
         "{label}: top-ranked candidate"
     );
+    if !o.group_candidates.is_empty() {
+        assert!(
+            o.group_candidates.iter().any(|c| c == candidate),
+            "{label}: group candidates {:?}",
+            o.group_candidates
+        );
+    }
 }
 
 #[test]
@@ -281,7 +352,7 @@ fn nominal_fixture_raises_nothing() {
 }
 
 fn sim_frames(scenario: IntakeScenario) -> impl Iterator<Item = Frame> {
-    let sim = IntakeSim::new(&scenario, &default_intake_model()).expect("scenario");
+    let sim = IntakeSim::from_scenario(&scenario).expect("scenario");
     sim.map(|f| Frame {
         t_ns: f.t_ns,
         seg: Segment {
@@ -595,7 +666,7 @@ fn the_primary_filter_gives_the_output() {
             IntakeFault::None,
         );
         let (mut n, mut sq) = (0u32, 0.0);
-        for f in IntakeSim::new(&sc, &default_intake_model()).expect("sim") {
+        for f in IntakeSim::from_scenario(&sc).expect("sim") {
             let seg = Segment {
                 speed_rpm: f.n_rpm,
                 throttle_deg: f.throttle_deg,

@@ -318,7 +318,9 @@ impl Evaluator {
             });
         }
         match (&mut self.log.open, self.log.previous) {
-            (Some(e), Some((_, Truth::Faulty(_), _))) => {
+            // An episode goes on through samples without an observable effect (they end no
+            // episode), so a DTC raised then still belongs to it.
+            (Some(e), Some((_, Truth::Faulty(_) | Truth::Ignored, _))) => {
                 e.first_dtc_s.get_or_insert(t_s);
                 let names_it = classes.contains(&e.class);
                 match (kind, names_it) {

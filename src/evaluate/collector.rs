@@ -13,7 +13,7 @@ use fdd_monitor::runtime::Runtime;
 
 use crate::replay::ReplayObserver;
 
-use super::fault_types::{fault_types, FaultType};
+use super::fault_types::{fault_types, group_events, FaultType};
 
 /// The latest ground truth of one truth topic.
 #[derive(Debug, Clone, Default)]
@@ -221,7 +221,10 @@ impl Evaluation {
     }
 
     /// A status change of one of `monitor`'s events at `t_ns`; a raised DTC (testFailed 0 -> 1)
-    /// is judged against the truth.
+    /// is judged against the truth. A group event's DTC ([`group_events`]) is a group DTC whose
+    /// candidates are the fault types scored as one of its isolation candidates (those with a
+    /// positive score); any other DTC is specific, correct for the fault types that list it.
+    /// While two faults act together, a DTC right for either is right.
     pub fn event(&mut self, t_ns: u64, monitor: &str, ev: &EventView<'_>) {
         if !ev.raised() {
             return;
@@ -230,38 +233,49 @@ impl Evaluation {
             return;
         };
         self.classes.clear();
-        self.classes.extend(
-            m.types
-                .iter()
-                .enumerate()
-                .filter(|(_, t)| t.dtcs.contains(&ev.event))
-                .map(|(i, _)| i),
-        );
-        // Two faults at once (`a+b`) count as an episode of the first: a DTC naming the other
-        // active one is as correct.
+        let kind = if group_events(monitor).contains(&ev.event) {
+            self.classes.extend(
+                m.types
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, t)| {
+                        ev.candidates
+                            .iter()
+                            .any(|(c, s)| *s > 0.0 && t.scored_as.contains(c))
+                    })
+                    .map(|(i, _)| i),
+            );
+            DtcKind::Group
+        } else {
+            self.classes.extend(
+                m.types
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, t)| t.dtcs.contains(&ev.event))
+                    .map(|(i, _)| i),
+            );
+            DtcKind::Specific
+        };
+        // Two faults at once (`a+b`): the episode is the first fault's, but a DTC that names
+        // the other one present is right too (two DTCs where the faults are isolable; a group
+        // DTC naming either): it counts as naming the episode's fault.
         if let Some(state) = m.truth.and_then(|i| self.truths.get(i)) {
             if state.active && state.fault.contains('+') {
-                let named = |f: &str| {
-                    m.types
-                        .iter()
-                        .position(|t| t.truth == f)
-                        .is_some_and(|i| self.classes.contains(&i))
-                };
-                let first = state
+                let active: Vec<usize> = state
                     .fault
                     .split('+')
-                    .find_map(|f| m.types.iter().position(|t| t.truth == f));
-                if let Some(first) = first {
-                    if state.fault.split('+').any(named) && !self.classes.contains(&first) {
+                    .filter_map(|f| m.types.iter().position(|t| t.truth == f))
+                    .collect();
+                if let Some(&first) = active.first() {
+                    if active.iter().any(|a| self.classes.contains(a))
+                        && !self.classes.contains(&first)
+                    {
                         self.classes.push(first);
                     }
                 }
             }
         }
-        if let Err(e) = m
-            .evaluator
-            .dtc(t_ns as f64 * 1e-9, &self.classes, DtcKind::Specific)
-        {
+        if let Err(e) = m.evaluator.dtc(t_ns as f64 * 1e-9, &self.classes, kind) {
             self.refused += 1;
             self.first_refusal
                 .get_or_insert_with(|| format!("monitor `{monitor}`: {e}"));

@@ -91,6 +91,19 @@ const fn maf(truth: &'static str) -> FaultType {
     }
 }
 
+/// The EGR valve's DTC family: a valve stuck at one position gives too much flow where the
+/// command is below it and too little where it is above, so either DTC sends the mechanic to
+/// the valve.
+const EGR_DTCS: &[&str] = &["egr_flow_insufficient", "egr_flow_excessive"];
+
+const fn egr(truth: &'static str) -> FaultType {
+    FaultType {
+        truth,
+        scored_as: &["egr_valve"],
+        dtcs: EGR_DTCS,
+    }
+}
+
 /// The intake faults of `fdd_fixtures::intake_sim`.
 pub const INTAKE: &[FaultType] = &[
     map("map_bias"),
@@ -107,27 +120,28 @@ pub const INTAKE: &[FaultType] = &[
     maf("maf_noise"),
     maf("maf_open"),
     maf("maf_short"),
-    FaultType {
-        truth: "egr_stuck_open",
-        scored_as: &["egr_valve"],
-        dtcs: &["egr_flow_excessive"],
-    },
-    FaultType {
-        truth: "egr_stuck_closed",
-        scored_as: &["egr_valve"],
-        dtcs: &["egr_flow_insufficient"],
-    },
-    FaultType {
-        truth: "egr_sluggish",
-        scored_as: &["egr_valve"],
-        dtcs: &["egr_flow_insufficient", "egr_flow_excessive"],
-    },
+    egr("egr_stuck_open"),
+    egr("egr_stuck_closed"),
+    egr("egr_sluggish"),
     FaultType {
         truth: "leak",
         scored_as: &["manifold_leak"],
         dtcs: &["intake_leak"],
     },
 ];
+
+/// The intake monitor's group events: detected, not isolated (their isolation candidates name
+/// the fault classes still possible).
+pub const INTAKE_GROUP_EVENTS: &[&str] = &["intake_air_path_group"];
+
+/// The group events of the monitor `name` (a DTC of one of them is a group DTC, judged by its
+/// candidates; every other DTC is specific).
+pub fn group_events(monitor: &str) -> &'static [&'static str] {
+    match monitor {
+        "intake" => INTAKE_GROUP_EVENTS,
+        _ => &[],
+    }
+}
 
 /// The fault types evaluated for the monitor `name` (empty for a monitor without ground truth).
 pub fn fault_types(monitor: &str) -> &'static [FaultType] {
@@ -150,10 +164,18 @@ mod tests {
         use fdd_monitor::throttle::{
             EVENT_NAMES as THROTTLE_EVENTS, FAULT_CLASSES as THROTTLE_CLASSES,
         };
-        for (types, classes, events) in [
-            (THROTTLE, &THROTTLE_CLASSES[..], &THROTTLE_EVENTS[..]),
-            (INTAKE, &INTAKE_CLASSES[..], &INTAKE_EVENTS[..]),
+        for (monitor, types, classes, events) in [
+            (
+                "throttle",
+                THROTTLE,
+                &THROTTLE_CLASSES[..],
+                &THROTTLE_EVENTS[..],
+            ),
+            ("intake", INTAKE, &INTAKE_CLASSES[..], &INTAKE_EVENTS[..]),
         ] {
+            for g in group_events(monitor) {
+                assert!(events.contains(g), "group event {g}");
+            }
             for t in types {
                 for c in t.scored_as {
                     assert!(classes.contains(c), "{}: class {c}", t.truth);

@@ -4,7 +4,9 @@
 //! (fusion-reset), and the raw sensors, over a transient drive profile.
 //!
 //! Protocol (fixed so that results are comparable):
-//! - truth: [`IntakeSim`] on the `config/intake.toml` model with a seeded `tip_in_out` profile
+//! - truth: [`IntakeSim::from_scenario`], the truth simulator's own plant
+//!   (`fixtures/plants/intake.toml`, unperturbed: the nominal physics of the
+//!   `config/intake.toml` model the filters use) with a seeded `tip_in_out` profile
 //!   (repeated tip-ins and tip-outs with speed changes, EGR at [`IntakeSettings::egr_pos`]
 //!   during tip-outs), no fault, default pulsation and sensor noise (MAP 700 Pa, MAF 1.5 %);
 //! - filters: the paper's filter model ([`ThrottleFlow::RandomWalk`]), input `frame.input()`
@@ -164,8 +166,9 @@ fn check(s: &IntakeSettings) -> Result<(), IntakeError> {
 /// Runs the comparison.
 pub fn run(s: &IntakeSettings) -> Result<IntakeReport, IntakeError> {
     check(s)?;
-    let truth_model = default_intake_model();
-    let model = IntakeModel::new(truth_model.params().clone(), ThrottleFlow::RandomWalk).map_err(
+    // The filters' model is the monitor's (config/intake.toml); the truth is the plant file's.
+    let filter_model = default_intake_model();
+    let model = IntakeModel::new(filter_model.params().clone(), ThrottleFlow::RandomWalk).map_err(
         |reason| IntakeError::Setting {
             name: "model",
             reason,
@@ -183,7 +186,7 @@ pub fn run(s: &IntakeSettings) -> Result<IntakeReport, IntakeError> {
         IntakeFault::None,
     );
     let t0 = Instant::now();
-    let sim = IntakeSim::new(&scenario, &truth_model)?;
+    let sim = IntakeSim::from_scenario(&scenario)?;
     let (map_std, maf_rel) = sim.noise();
     let frames: Vec<IntakeFrame> = sim.collect();
     let sim_time = t0.elapsed();

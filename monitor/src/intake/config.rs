@@ -122,8 +122,84 @@ pub struct IntakeMonitorConfig {
     /// `isolation_max_s` after the alarm is dropped as unexplained.
     pub isolation_min_glr: f64,
     pub isolation_margin: f64,
+    /// The lead must also be this fraction of the best statistic (-): over a long episode the
+    /// statistics grow with the model error the hypotheses share, and a fixed lead would
+    /// eventually be met by that error alone.
+    pub isolation_margin_rel: f64,
     pub isolation_min_s: f64,
     pub isolation_max_s: f64,
+    /// During an episode each failure of a residual test re-arms the tests; when they stay
+    /// quiet this long (s), the alarm is over and the episode (and a group DTC) closes. Longer
+    /// than a wide-open-throttle leg, where a leak or an EGR valve hardly shows, so that an
+    /// ambiguous fault collects the operating points that tell its hypotheses apart.
+    pub episode_quiet_s: f64,
+    /// Model-error allowances of the residuals (the plant is never exactly the model): each
+    /// residual's variance gets `(rel x value)^2` added, with the value the MAP reading for the
+    /// pressure residual (`pressure_model_rel`) and the MAF reading for the flow residual
+    /// (`flow_model_rel`; `throttle_model_rel` for the throttle-model flow), and a transient
+    /// term `(transient_tolerance_s x rate of change of the reading)^2` (sensor lags and
+    /// manifold dynamics known to some milliseconds only).
+    pub pressure_model_rel: f64,
+    pub flow_model_rel: f64,
+    pub transient_tolerance_s: f64,
+    /// Uncertainty of the ambient pressure (Pa) in the throttle-model flow: away from choked
+    /// flow the nozzle flow depends on the pressure ratio to an ambient the monitor does not
+    /// measure (weather and altitude move it by some kPa).
+    pub ambient_pressure_std_pa: f64,
+    /// Learned corrections (like an ECU's adaptation): while no test fails and nothing is
+    /// decided, the monitor learns the ratio of the air flow the MAP-only filter implies to the
+    /// MAF reading (volumetric-efficiency and MAF calibration errors of this engine), and, while
+    /// the throttle is choked, the ratio of the MAF to the throttle model's flow (discharge,
+    /// bore, ambient conditions), as exponentially weighted averages over `adapt_time_s` (s),
+    /// each limited to `1 +- adapt_limit`. The MAF reading is multiplied by the first before
+    /// the filters, the throttle model's flow by the second. The residual tests start when the
+    /// first has learned for `adapt_min_s` (s) of driving; the throttle-flow residual is used
+    /// once the second has too.
+    pub adapt_time_s: f64,
+    pub adapt_min_s: f64,
+    pub adapt_limit: f64,
+    /// Sensor noise tests: each local filter's innovation (the MAP-only filter sees only the
+    /// MAP, the MAF-only only the MAF), normalized by its variance (with the MAF noise taken
+    /// relative to the reading and the transient term above), squared and capped at
+    /// `noise_cap`, is divided by its level learned while no test fails (an exponentially
+    /// weighted mean over `adapt_time_s`, within `1 / noise_learn_limit .. noise_learn_limit`
+    /// of the configured R, so the test follows the noise of the sensors fitted). A CUSUM of
+    /// the log-likelihood ratio of a variance `noise_ratio` times that level fails at
+    /// `noise_threshold`: a noisy (erratic) sensor, its range/performance DTC.
+    pub noise_ratio: f64,
+    pub noise_threshold: f64,
+    /// The noise tests skip a segment in which the throttle moves faster than
+    /// `noise_max_throttle_rate_deg_s` (deg/s), and the `noise_settle_segments` after it: a
+    /// tip-in moves the manifold faster than the random-walk throttle flow of the local filters
+    /// follows, and their innovations are not noise then.
+    pub noise_max_throttle_rate_deg_s: f64,
+    pub noise_settle_segments: u32,
+    pub noise_cap: f64,
+    pub noise_learn_limit: f64,
+    /// Group DTC: when a residual test has failed and isolation has not named a fault
+    /// `group_after_s` (s) after the alarm, the group event (`dtc_group`) fails, carrying as
+    /// candidates every hypothesis whose statistic is within `group_margin` of the best (and
+    /// positive), with normalized scores. It passes again when isolation names the fault (the
+    /// specific DTC is raised then), or when the alarm is closed.
+    pub group_after_s: f64,
+    pub group_margin: f64,
+    /// The group margin is at least this fraction of the best statistic (-), for the same
+    /// reason as `isolation_margin_rel`. A decided fault among these candidates is refined
+    /// (its size updated) rather than a new fault named.
+    pub group_margin_rel: f64,
+    /// Healing. A circuit, frozen-reading or noisy-sensor fault passes again once its sensor
+    /// reads plausibly (in range, moving, not noisy) for `heal_s` (s). A residual fault stays
+    /// taken out of the residuals (its fitted effect is subtracted, so that the tests look for
+    /// new faults); it passes again when a sequential test between "still there" and "gone" on
+    /// the residuals (a CUSUM of the log-likelihood ratio) has favoured "gone" by
+    /// `residual_heal_llr` for `heal_s`.
+    pub heal_s: f64,
+    pub residual_heal_llr: f64,
+    /// A MAP reading above `map_high_ratio * p_a` is a circuit-high fault only while the
+    /// filter's estimate of the sensor's pressure plus three standard deviations stays below
+    /// `map_high_ratio * p_a - map_high_margin_pa` (Pa): a healthy sensor at wide-open throttle
+    /// under a higher ambient than the model's, with its pulsation, reads above the limit.
+    pub map_high_margin_pa: f64,
     /// DTCs (SAE J2012 code and failure type byte).
     pub dtc_map_performance: String,
     pub dtc_map_low: String,
@@ -134,6 +210,8 @@ pub struct IntakeMonitorConfig {
     pub dtc_egr_insufficient: String,
     pub dtc_egr_excessive: String,
     pub dtc_leak: String,
+    /// The group DTC: P0068 "MAP/MAF - throttle position correlation".
+    pub dtc_group: String,
 }
 
 impl Default for IntakeMonitorConfig {
@@ -162,21 +240,42 @@ impl Default for IntakeMonitorConfig {
             frozen_segments: 10,
             clip_sigma: 8.0,
             pressure_cusum_min_bias_sigma: 2.0,
-            pressure_cusum_threshold: 40.0,
+            pressure_cusum_threshold: 25.0,
             flow_cusum_min_bias_sigma: 2.0,
-            flow_cusum_threshold: 60.0,
+            flow_cusum_threshold: 30.0,
             throttle_cusum_min_bias_sigma: 2.0,
-            throttle_cusum_threshold: 40.0,
+            throttle_cusum_threshold: 25.0,
             choked_ratio: 0.5,
             flow_ratio_max: 0.9,
             throttle_model_rel: 0.01,
             nis_window: 50,
             nis_cap: 50.0,
-            nis_threshold: 1000.0,
+            nis_threshold: 1500.0,
             isolation_min_glr: 60.0,
             isolation_margin: 50.0,
+            isolation_margin_rel: 0.02,
             isolation_min_s: 0.2,
             isolation_max_s: 4.0,
+            episode_quiet_s: 6.0,
+            pressure_model_rel: 0.02,
+            flow_model_rel: 0.02,
+            transient_tolerance_s: 0.01,
+            ambient_pressure_std_pa: 3000.0,
+            adapt_time_s: 60.0,
+            adapt_min_s: 5.0,
+            adapt_limit: 0.08,
+            noise_ratio: 4.0,
+            noise_threshold: 30.0,
+            noise_max_throttle_rate_deg_s: 10.0,
+            noise_settle_segments: 10,
+            noise_cap: 16.0,
+            noise_learn_limit: 3.0,
+            group_after_s: 0.5,
+            group_margin: 100.0,
+            group_margin_rel: 0.3,
+            heal_s: 2.0,
+            residual_heal_llr: 20.0,
+            map_high_margin_pa: 5000.0,
             dtc_map_performance: "P0106-64".into(),
             dtc_map_low: "P0107-16".into(),
             dtc_map_high: "P0108-17".into(),
@@ -186,6 +285,7 @@ impl Default for IntakeMonitorConfig {
             dtc_egr_insufficient: "P0401-00".into(),
             dtc_egr_excessive: "P0402-00".into(),
             dtc_leak: "P2279-00".into(),
+            dtc_group: "P0068-00".into(),
         }
     }
 }

@@ -113,6 +113,8 @@ pub struct SegmentRecord {
     /// Manifold pressure independent of the MAP sensor (the MAF-only filter's), Pa: what a MAP
     /// gain error multiplies.
     pub p_ref: f64,
+    /// Segment length (s): the time a drifting sensor's error grows with.
+    pub dt: f64,
 }
 
 /// Pressure scale of the MAP gain regressor (Pa), for conditioning.
@@ -125,6 +127,55 @@ const MAP_GAIN_MIN_SPREAD_PA: f64 = 10_000.0;
 /// charge (10, the 99.8 % point of a one-dof chi-square) let the pressure-dependent signature of
 /// an EGR valve stuck open pass for a MAP gain error long enough to delay its isolation by 2 s.
 const MAP_GAIN_PENALTY: f64 = 60.0;
+/// Smallest weighted spread of the MAF reading over a fit, relative to its mean, for the MAF
+/// hypothesis to fit an offset besides its gain (the same penalty as the MAP gain applies).
+const MAF_OFFSET_MIN_SPREAD_REL: f64 = 0.3;
+
+/// Adds one regressor sample `h` (and the residual `z`) to a single-parameter fit's sums.
+fn add_ramp(sums: &mut [f64; 2], h: f64, z: f64) {
+    sums[0] += h * h;
+    sums[1] += h * z;
+}
+
+/// The single-parameter fit of `sums`: `(T, theta)`.
+fn ramp_fit(sums: &[f64; 2]) -> (f64, f64) {
+    if sums[0] > 0.0 {
+        let theta = sums[1] / sums[0];
+        (theta * sums[1], theta)
+    } else {
+        (0.0, 0.0)
+    }
+}
+
+/// The two-parameter least-squares fit of regressors with sums `[sum g^2, sum g z]`,
+/// `[sum h^2, sum h z]` and `sum g h`: `(T, a, b)` for `z ~ a g + b h`, `None` when they cannot
+/// be told apart.
+fn two_fit(a: [f64; 2], b: [f64; 2], ab: f64) -> Option<(f64, f64, f64)> {
+    let det = a[0] * b[0] - ab * ab;
+    // Nearly collinear regressors (less than 1 % of independent information) say nothing.
+    if !(det > 1e-2 * a[0] * b[0]) {
+        return None;
+    }
+    let x = (b[0] * a[1] - ab * b[1]) / det;
+    let y = (a[0] * b[1] - ab * a[1]) / det;
+    Some((x * a[1] + y * b[1], x, y))
+}
+
+/// Steps the signature responses of a bank or a compensation through segment `r`, `tau`
+/// (s) after the onset.
+fn step_deltas(delta: &mut [f64; 6], r: &SegmentRecord, tau: f64) {
+    let inflows = [
+        -r.maf,
+        r.egr_full,
+        r.egr_full * r.egr_cmd,
+        r.leak_unit,
+        -1.0,
+        -tau,
+    ];
+    for (d, u) in delta.iter_mut().zip(inflows) {
+        *d = r.decay * *d + r.input_gain * u;
+    }
+}
 
 /// Fitted size of a hypothesis.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -138,14 +189,30 @@ pub struct Fit {
     /// MAP hypothesis only: the gain error of the MAP reading (-), which adds `gain p_m` to the
     /// offset; 0 for the others.
     pub gain: f64,
+    /// MAF hypothesis only: the offset of the MAF reading (kg/s), besides its gain error; 0 for
+    /// the others.
+    pub offset: f64,
+    /// MAP and MAF hypotheses: the error's growth since the onset (Pa/s, kg/s per s) when the
+    /// sensor drifts (then the other sizes are 0); 0 for the others.
+    pub rate: f64,
 }
 
 /// Running least-squares sums since the onset.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct HypothesisBank {
     /// Pressure responses: MAF (u = -MAF), EGR full-open (u = W_egr1), EGR command
-    /// (u = W_egr1 e_cmd), leak (u = W_orifice1).
-    delta: [f64; 4],
+    /// (u = W_egr1 e_cmd), leak (u = W_orifice1), MAF offset (u = -1), MAF drift (u = -tau,
+    /// with tau the time since the onset).
+    delta: [f64; 6],
+    /// Time since the onset (s), at the end of the last segment.
+    elapsed: f64,
+    /// Drift regressors (an error growing linearly from the onset): MAP (`tau g_map`) and MAF
+    /// (pressure: the response to `-tau`; flow: `tau / s_w`): sum h^2 and sum h z each.
+    map_ramp: [f64; 2],
+    maf_ramp: [f64; 2],
+    /// Cross sums of each drift regressor with its sensor's offset regressor.
+    map_ramp_x: f64,
+    maf_ramp_x: f64,
     /// sum z^2 over both channels.
     szz: f64,
     /// Single-parameter hypotheses (MAP, MAF, leak): sum g^2 and sum g z.
@@ -161,7 +228,18 @@ pub struct HypothesisBank {
     m22: f64,
     m12: f64,
     m2z: f64,
+    /// MAF offset regressor `h` (pressure: the response to a unit inflow error, flow: 1 / s_w):
+    /// sum h^2, sum g_maf h, sum h z.
+    f22: f64,
+    f12: f64,
+    f2z: f64,
     segments: usize,
+    /// The leak area may be negative: a refit on residuals from which a leak already
+    /// decided is taken out (too large a compensation leaves a negative leak).
+    signed_leak: bool,
+    /// The EGR hypothesis is a change of the stuck position from one already taken out of
+    /// the residuals (a refit while a decided EGR fault is compensated): `z = ds g1`, any sign.
+    egr_relative: bool,
 }
 
 impl HypothesisBank {
@@ -172,7 +250,11 @@ impl HypothesisBank {
 
     /// Forgets everything: the fault is taken to start with the next segment.
     pub fn reset(&mut self) {
-        *self = Self::default();
+        *self = Self {
+            signed_leak: self.signed_leak,
+            egr_relative: self.egr_relative,
+            ..Self::default()
+        };
     }
 
     /// Segments accumulated.
@@ -183,11 +265,10 @@ impl HypothesisBank {
     /// Adds one segment. Residuals are not clipped: a fault's residual is large by nature, and
     /// clipping it would bias every fit towards the hypotheses with the flattest signature.
     pub fn push(&mut self, r: &SegmentRecord) {
-        let inflows = [-r.maf, r.egr_full, r.egr_full * r.egr_cmd, r.leak_unit];
-        for (d, u) in self.delta.iter_mut().zip(inflows) {
-            *d = r.decay * *d + r.input_gain * u;
-        }
+        self.elapsed += r.dt;
+        step_deltas(&mut self.delta, r, self.elapsed);
         self.segments += 1;
+        let tau = self.elapsed;
         if r.z_p.is_finite() && r.s_p > 0.0 {
             let z = r.z_p;
             let g = [1.0 / r.s_p, self.delta[0] / r.s_p, self.delta[3] / r.s_p];
@@ -198,8 +279,17 @@ impl HypothesisBank {
                 *gz += gi * z;
             }
             self.add_map_gain(g[0], r.p_ref, z);
+            self.add_maf_offset(g[1], self.delta[4] / r.s_p, z);
+            add_ramp(&mut self.map_ramp, tau * g[0], z);
+            add_ramp(&mut self.maf_ramp, self.delta[5] / r.s_p, z);
+            self.map_ramp_x += g[0] * tau * g[0];
+            self.maf_ramp_x += self.delta[4] / r.s_p * self.delta[5] / r.s_p;
             let g1 = self.delta[1] / r.s_p;
-            let v = z + self.delta[2] / r.s_p;
+            let v = if self.egr_relative {
+                z
+            } else {
+                z + self.delta[2] / r.s_p
+            };
             self.e11 += g1 * g1;
             self.e1v += g1 * v;
             self.evv += v * v;
@@ -214,6 +304,52 @@ impl HypothesisBank {
             self.add_map_gain(g_map, r.p_ref, z);
             self.sgg[1] += g_maf * g_maf;
             self.sgz[1] += g_maf * z;
+            self.add_maf_offset(g_maf, 1.0 / r.s_w, z);
+            add_ramp(&mut self.map_ramp, tau * g_map, z);
+            add_ramp(&mut self.maf_ramp, tau / r.s_w, z);
+            self.map_ramp_x += g_map * tau * g_map;
+            self.maf_ramp_x += 1.0 / r.s_w * tau / r.s_w;
+        }
+    }
+
+    /// The MAF offset regressor's sums.
+    fn add_maf_offset(&mut self, g: f64, h: f64, z: f64) {
+        self.f22 += h * h;
+        self.f12 += g * h;
+        self.f2z += h * z;
+    }
+
+    /// The MAF hypothesis: reading error `(g - 1) MAF + b` fitted by least squares (gain only
+    /// when the flow has not moved enough to tell an offset from a gain). Returns
+    /// `(T, g - 1, b)`.
+    fn maf_fit(&self) -> (f64, f64, f64) {
+        let (s11, s1z) = (self.sgg[1], self.sgz[1]);
+        if !(s11 > 0.0) {
+            return (0.0, 0.0, 0.0);
+        }
+        let g0 = s1z / s11;
+        let gain_only = (g0 * s1z, g0, 0.0);
+        // The gain regressor is about MAF times the offset regressor: the flow's weighted
+        // spread relative to its mean tells them apart.
+        if !(self.f22 > 0.0) {
+            return gain_only;
+        }
+        let mean = self.f12 / self.f22;
+        let spread = (s11 / self.f22 - mean * mean).max(0.0).sqrt();
+        if !(mean > 0.0) || spread < MAF_OFFSET_MIN_SPREAD_REL * mean {
+            return gain_only;
+        }
+        let det = s11 * self.f22 - self.f12 * self.f12;
+        if !(det > 0.0) {
+            return gain_only;
+        }
+        let g = (self.f22 * s1z - self.f12 * self.f2z) / det;
+        let b = (s11 * self.f2z - self.f12 * s1z) / det;
+        let t = g * s1z + b * self.f2z - MAP_GAIN_PENALTY;
+        if t > gain_only.0 {
+            (t, g, b)
+        } else {
+            gain_only
         }
     }
 
@@ -272,13 +408,50 @@ impl HypothesisBank {
             }
             (self.sgz[i] * theta, theta)
         };
-        let (t_map, b, map_gain) = self.map_fit();
-        let (t_maf, g) = one(1, false);
-        let (t_leak, a) = one(2, true);
+        // Each sensor's error as a step (offset and gain) or as a drift from the onset,
+        // whichever explains more.
+        let (mut t_map, mut b, mut map_gain, mut map_rate) = {
+            let (t, b, c) = self.map_fit();
+            (t, b, c, 0.0)
+        };
+        let (t_r, r) = ramp_fit(&self.map_ramp);
+        if t_r > t_map {
+            (t_map, b, map_gain, map_rate) = (t_r, 0.0, 0.0, r);
+        }
+        if let Some((t, b2, r2)) =
+            two_fit([self.sgg[0], self.sgz[0]], self.map_ramp, self.map_ramp_x)
+        {
+            if t - MAP_GAIN_PENALTY > t_map {
+                (t_map, b, map_gain, map_rate) = (t - MAP_GAIN_PENALTY, b2, 0.0, r2);
+            }
+        }
+        let (mut t_maf, mut g, mut maf_offset, mut maf_rate) = {
+            let (t, g, b) = self.maf_fit();
+            (t, g, b, 0.0)
+        };
+        let (t_r, r) = ramp_fit(&self.maf_ramp);
+        if t_r > t_maf {
+            (t_maf, g, maf_offset, maf_rate) = (t_r, 0.0, 0.0, r);
+        }
+        let (t_b, b_off) = ramp_fit(&[self.f22, self.f2z]);
+        if t_b > t_maf {
+            (t_maf, g, maf_offset, maf_rate) = (t_b, 0.0, b_off, 0.0);
+        }
+        if let Some((t, b2, r2)) = two_fit([self.f22, self.f2z], self.maf_ramp, self.maf_ramp_x) {
+            if t - MAP_GAIN_PENALTY > t_maf {
+                (t_maf, g, maf_offset, maf_rate) = (t - MAP_GAIN_PENALTY, 0.0, b2, r2);
+            }
+        }
+        let (t_leak, a) = one(2, !self.signed_leak);
         // EGR: minimize sum (v - s g1)^2 over s in [0, 1]; the statistic is the drop from the
         // no-fault sum z_p^2 (can be negative when the command moved: then it explains nothing).
         let (t_egr, s) = if self.e11 > 0.0 {
-            let s = (self.e1v / self.e11).clamp(0.0, 1.0);
+            let (lo, hi) = if self.egr_relative {
+                (-1.0, 1.0)
+            } else {
+                (0.0, 1.0)
+            };
+            let s = (self.e1v / self.e11).clamp(lo, hi);
             let rss = self.evv - 2.0 * s * self.e1v + s * s * self.e11;
             ((self.szz_p - rss).max(0.0), s)
         } else {
@@ -290,24 +463,32 @@ impl HypothesisBank {
                 glr: t_map,
                 parameter: b,
                 gain: map_gain,
+                offset: 0.0,
+                rate: map_rate,
             },
             Fit {
                 fault: IntakeFault::MafSensor,
                 glr: t_maf,
                 parameter: g,
                 gain: 0.0,
+                offset: maf_offset,
+                rate: maf_rate,
             },
             Fit {
                 fault: IntakeFault::EgrValve,
                 glr: t_egr,
                 parameter: s,
                 gain: 0.0,
+                offset: 0.0,
+                rate: 0.0,
             },
             Fit {
                 fault: IntakeFault::Leak,
                 glr: t_leak,
                 parameter: a,
                 gain: 0.0,
+                offset: 0.0,
+                rate: 0.0,
             },
         ]
     }
@@ -322,6 +503,140 @@ impl HypothesisBank {
     /// The fit of one hypothesis.
     pub fn fit(&self, fault: IntakeFault) -> Fit {
         self.fits()[fault.index()]
+    }
+
+    /// The pressure responses since the onset (MAF, EGR full-open, EGR command, leak, MAF
+    /// offset): the
+    /// state a [`Compensation`] of a fault fitted from this bank continues from.
+    pub fn deltas(&self) -> [f64; 6] {
+        self.delta
+    }
+
+    /// Time since the onset (s).
+    pub fn elapsed(&self) -> f64 {
+        self.elapsed
+    }
+}
+
+/// A decided fault's fitted size, and its effect on the residuals predicted forward. The
+/// monitor takes the fault out of its inputs (a sensor's reading corrected by
+/// [`Compensation::correct`], the decided EGR position or the leak's flow given to the model),
+/// so the residuals test the rest for new faults; the predicted effect ([`Compensation::step`])
+/// tells the fault's disappearance from its persistence (healing).
+///
+/// It runs the signature recursions of [`HypothesisBank`] for one hypothesis with the size
+/// fixed, starting from the responses of the bank it was fitted in ([`HypothesisBank::deltas`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Compensation {
+    pub fault: IntakeFault,
+    /// Fitted size (see [`Fit::parameter`]) and, for the MAP, the gain error.
+    pub parameter: f64,
+    pub gain: f64,
+    /// MAF only: the offset (kg/s).
+    pub offset: f64,
+    /// MAP and MAF: the drift rate (Pa/s, kg/s per s).
+    pub rate: f64,
+    delta: [f64; 6],
+    /// Time since the fault's onset (s).
+    elapsed: f64,
+}
+
+impl Compensation {
+    /// The compensation of `fit`, fitted in `bank`.
+    pub fn new(fit: &Fit, bank: &HypothesisBank) -> Self {
+        Self {
+            fault: fit.fault,
+            parameter: fit.parameter,
+            gain: fit.gain,
+            offset: fit.offset,
+            rate: fit.rate,
+            delta: bank.deltas(),
+            elapsed: bank.elapsed(),
+        }
+    }
+
+    /// Adds a refinement fitted on the residuals this compensation leaves (the same hypothesis,
+    /// from a later onset, in `bank`): the sizes add (the signatures are linear in the sizes
+    /// and, once the manifold has settled, the same from either onset; a drift fitted from the
+    /// later onset is a drift from the first onset less the offset it had reached then). The
+    /// EGR position's refit, made with the decided position as the model's input, is the
+    /// position itself.
+    pub fn refine(&mut self, fit: &Fit, bank: &HypothesisBank) {
+        if fit.fault != self.fault {
+            return;
+        }
+        let lag = self.elapsed - bank.elapsed();
+        match self.fault {
+            IntakeFault::MapSensor => {
+                self.parameter += fit.parameter - fit.rate * lag;
+                self.gain += fit.gain;
+                self.rate += fit.rate;
+            }
+            IntakeFault::MafSensor => {
+                self.parameter += fit.parameter;
+                self.offset += fit.offset - fit.rate * lag;
+                self.rate += fit.rate;
+            }
+            // The filters are given the decided position as the EGR input, so a refit is the
+            // position itself.
+            IntakeFault::EgrValve => self.parameter = fit.parameter,
+            IntakeFault::Leak => self.parameter += fit.parameter,
+        }
+    }
+
+    /// The reading with the decided sensor error taken out, `tau_ahead` (s) after the last
+    /// segment stepped: MAP `(y - b - r tau) / (1 + c)`, MAF `(y - b - r tau) / (1 + g)`; other
+    /// faults leave it as it is.
+    pub fn correct(&self, y: f64, tau_ahead: f64) -> f64 {
+        let tau = self.elapsed + tau_ahead;
+        match self.fault {
+            IntakeFault::MapSensor => (y - self.parameter - self.rate * tau) / (1.0 + self.gain),
+            IntakeFault::MafSensor => (y - self.offset - self.rate * tau) / (1.0 + self.parameter),
+            IntakeFault::EgrValve | IntakeFault::Leak => y,
+        }
+    }
+
+    /// The size of the error this compensation removes now, at the reading `y` of its sensor
+    /// (MAP in Pa, MAF in kg/s; the leak's area), comparable across its refinements; `None`
+    /// for the EGR valve, whose "no fault" is not a size.
+    pub fn magnitude(&self, y: f64) -> Option<f64> {
+        match self.fault {
+            IntakeFault::MapSensor => {
+                Some((self.parameter + self.gain * y + self.rate * self.elapsed).abs())
+            }
+            IntakeFault::MafSensor => {
+                Some((self.parameter * y + self.offset + self.rate * self.elapsed).abs())
+            }
+            IntakeFault::EgrValve => None,
+            IntakeFault::Leak => Some(self.parameter.abs()),
+        }
+    }
+
+    /// Steps the responses with segment `r` and returns the fault's predicted effect on the
+    /// pressure residual (Pa) and on the throttle-flow residual (kg/s).
+    pub fn step(&mut self, r: &SegmentRecord) -> (f64, f64) {
+        self.elapsed += r.dt;
+        step_deltas(&mut self.delta, r, self.elapsed);
+        match self.fault {
+            IntakeFault::MapSensor => {
+                let e = self.parameter
+                    + self.rate * self.elapsed
+                    + if r.p_ref.is_finite() {
+                        self.gain * r.p_ref
+                    } else {
+                        0.0
+                    };
+                (e, -r.map_flow_gain * e)
+            }
+            IntakeFault::MafSensor => (
+                self.parameter * self.delta[0]
+                    + self.offset * self.delta[4]
+                    + self.rate * self.delta[5],
+                self.parameter * r.maf + self.offset + self.rate * self.elapsed,
+            ),
+            IntakeFault::EgrValve => (self.parameter * self.delta[1] - self.delta[2], 0.0),
+            IntakeFault::Leak => (self.parameter * self.delta[3], 0.0),
+        }
     }
 }
 
@@ -345,14 +660,27 @@ pub struct OnsetScan {
 impl OnsetScan {
     /// A scan over onsets from `earliest` to `latest` (segment indices, inclusive).
     pub fn new(earliest: u64, latest: u64) -> Self {
+        Self::with_modes(earliest, latest, false, false)
+    }
+
+    /// [`OnsetScan::new`] for a refit on residuals from which decided faults are taken out:
+    /// with a leak area of either sign when `signed_leak` (a decided leak's compensation may
+    /// be too large), and the EGR hypothesis as a change of the stuck position, of either sign,
+    /// when `egr_relative` (a decided EGR fault is compensated).
+    pub fn with_modes(earliest: u64, latest: u64, signed_leak: bool, egr_relative: bool) -> Self {
         let latest = latest.max(earliest);
         let span = (latest - earliest) as f64;
         let mut onsets = [earliest; ONSETS];
         for (j, o) in onsets.iter_mut().enumerate() {
             *o = earliest + (span * j as f64 / (ONSETS - 1) as f64).round() as u64;
         }
+        let bank = HypothesisBank {
+            signed_leak,
+            egr_relative,
+            ..HypothesisBank::new()
+        };
         Self {
-            banks: [HypothesisBank::new(); ONSETS],
+            banks: [bank; ONSETS],
             onsets,
         }
     }
@@ -369,6 +697,20 @@ impl OnsetScan {
                 bank.push(r);
             }
         }
+    }
+
+    /// The bank (candidate onset) in which `fault` fits best.
+    pub fn best_bank(&self, fault: IntakeFault) -> &HypothesisBank {
+        let mut best = &self.banks[0];
+        let mut glr = f64::NEG_INFINITY;
+        for bank in &self.banks {
+            let g = bank.fit(fault).glr;
+            if g > glr {
+                glr = g;
+                best = bank;
+            }
+        }
+        best
     }
 
     /// For each hypothesis its best fit over the candidate onsets, sorted by decreasing
@@ -457,6 +799,7 @@ mod tests {
             egr_cmd,
             leak_unit: 240.0,
             p_ref: 50_000.0,
+            dt: 0.02,
         }
     }
 

@@ -17,7 +17,22 @@
 //! intake-valve flow). The local filters are what makes isolation possible: each sees one
 //! sensor, so each predicts the *other* sensor from the model alone.
 //!
-//! Tests, each reported every segment on `/fdd/tests`:
+//! # The plant is not the model
+//!
+//! Every residual's variance carries model-error allowances besides the filter's covariance and
+//! the sensor noise: a relative term (`pressure_model_rel`, `flow_model_rel`,
+//! `throttle_model_rel`), a transient term (`transient_tolerance_s` times the reading's rate of
+//! change: lags and dynamics known to a few milliseconds) and, in the throttle-model flow, the
+//! unknown ambient pressure (`ambient_pressure_std_pa`). Two corrections are learned while no
+//! test fails and nothing is decided, like an ECU's adaptation values: the ratio of the air
+//! flow the MAP-only filter implies to the MAF reading (volumetric-efficiency and MAF
+//! calibration errors; the MAF is multiplied by it before the filters) and, while the throttle
+//! is choked, the ratio of the MAF to the throttle model's flow (discharge, bore, ambient).
+//! The residual tests start once the first has learned for `adapt_min_s`.
+//!
+//! # Tests
+//!
+//! Each reported every segment on `/fdd/tests`:
 //! - `intake_pressure_consistency`: CUSUM on the MAP reading against the MAF-local filter's MAP
 //!   prediction (normalized);
 //! - `intake_flow_consistency`: CUSUM on the MAF reading against the MAP-local filter's MAF
@@ -26,28 +41,50 @@
 //!   throttle opening, only while the throttle is choked (then the throttle flow depends on the
 //!   opening alone, so this test sees only the MAF sensor);
 //! - `intake_centralized_nis`, `intake_federated_nis`: windowed sums of the 2-dof NIS;
+//! - `intake_map_noise`, `intake_maf_noise`: variance CUSUMs on each local filter's innovation
+//!   against its learned level (a noisy sensor);
 //! - `intake_map_circuit`, `intake_maf_circuit`: readings outside the circuit range (kept out
-//!   of the filters);
+//!   of the filters), judged against the model at both ends;
 //! - `intake_map_frozen`, `intake_maf_frozen`: readings repeated exactly (a stuck sensor);
 //! - `intake_input_range`: an engine speed, throttle or EGR input the model refuses (speed 0 or
-//!   negative, NaN): the segment is skipped, nothing reaches the filters.
+//!   negative, NaN): the segment is skipped, nothing reaches the filters;
+//! - `intake_isolation`: while an isolation episode is open, the lead of the best hypothesis.
 //!
-//! Decision: a circuit range violation lasting `circuit_persist_segments` is a circuit fault
-//! (P0107/P0108, P0102/P0103); a reading repeated exactly for `frozen_segments` segments is a
-//! stuck sensor (P0106/P0101: a live sensor's noise moves its reading every segment). When a residual test fails, the hypothesis bank
-//! ([`hypotheses`]) is refitted from the failing test's estimated onset (the last time its
-//! CUSUM was zero) and then follows every segment; the best hypothesis is named when it is
-//! significant and leads the runner-up clearly (see [`IntakeMonitorConfig`]). The EGR DTC is
-//! P0401 (insufficient) when the fitted stuck position is below the mean command since the
-//! onset, P0402 (excessive) otherwise. A named fault is latched for the operation cycle.
+//! # Decisions: per component, none latched
 //!
-//! Recovery policy: from the step a fault is named, the estimate output (`manifold_pressure`,
-//! `intake_valve_flow`) comes from the local filter that fault leaves sound: the MAF-only one
-//! after a MAP fault, the MAP-only one after a MAF, EGR or leak fault (it measures the pressure
-//! and its random-walk throttle flow absorbs unmetered air); the source names it. A reading
-//! refused by the circuit check is kept out of every filter; the centralized EKF and the pair go
-//! on with the other sensor, and the output comes from that sensor's local filter meanwhile. A
-//! new operation cycle starts again from the primary filter.
+//! Each sensor's checks run whatever the other sensor and the residual tests do:
+//! - a circuit range violation lasting `circuit_persist_segments` is a circuit fault
+//!   (P0107/P0108, P0102/P0103);
+//! - a reading repeated exactly for `frozen_segments` segments is a stuck sensor (P0106/P0101:
+//!   a live sensor's noise moves its reading every segment);
+//! - a failed noise test is a noisy sensor (P0106/P0101).
+//!
+//! Such a fault passes again once its sensor reads plausibly (in range, moving, not noisy) for
+//! `heal_s`. A circuit or frozen sensor is kept out of the filters meanwhile; when it comes
+//! back the filters start again.
+//!
+//! When a residual test fails, the hypothesis bank ([`hypotheses`]) is refitted from the
+//! failing test's estimated onset (the last time its CUSUM was zero) and then follows every
+//! segment; the best hypothesis is named when it is significant and leads the runner-up
+//! clearly (see [`IntakeMonitorConfig`]). The EGR DTC is P0401 (insufficient) when the fitted
+//! stuck position is below the mean command since the onset, P0402 (excessive) otherwise.
+//! When the hypotheses stay ambiguous (a leak and an EGR valve stuck open at idle explain the
+//! same data), the **group DTC** `intake_air_path_group` (P0068) fails `group_after_s` after
+//! the alarm, with every hypothesis within `group_margin` of the best as its candidates; when
+//! isolation decides later, the specific DTC is raised and the group event passes.
+//!
+//! A named residual fault is not latched either: its fitted effect is predicted forward
+//! ([`Compensation`]) and taken out of the residuals, so the tests go on looking for new
+//! faults (a second, different fault gets its own DTC; a later refit of the same hypothesis
+//! refines its size), and a sequential test on the residuals between "still there" and "gone"
+//! lets it pass again once it has healed.
+//!
+//! Recovery policy: the estimate output (`manifold_pressure`, `intake_valve_flow`) comes from
+//! the local filter that the decided faults leave sound: the MAF-only one after a MAP fault,
+//! the MAP-only one after a MAF, EGR or leak fault (it measures the pressure and its
+//! random-walk throttle flow absorbs unmetered air); the source names it. A reading refused
+//! by the circuit check is kept out of every filter; the centralized EKF and the pair go on
+//! with the other sensor, and the output comes from that sensor's local filter meanwhile.
 
 pub mod config;
 pub mod hypotheses;
@@ -63,7 +100,8 @@ use nalgebra::{Matrix1, Matrix2, SMatrix, SVector, Vector1, Vector2};
 
 pub use config::{IntakeMonitorConfig, PrimaryFilter};
 pub use hypotheses::{
-    Fit, HypothesisBank, IntakeFault, OnsetScan, RecordRing, SegmentRecord, ALL_FAULTS,
+    Compensation, Fit, HypothesisBank, IntakeFault, OnsetScan, RecordRing, SegmentRecord,
+    ALL_FAULTS,
 };
 
 use crate::monitor::{Monitor, Output, OutputSink};
@@ -82,9 +120,23 @@ const NIS_RING: usize = 512;
 /// Segments the throttle must have been choked before its flow residual is used (the MAF lag
 /// and the lagged model flow have settled).
 const CHOKED_SETTLE: u32 = 3;
+/// Time (s) the residual tests wait after the filters start again (a sensor back in use).
+const RESTART_SETTLE_S: f64 = 1.0;
+
+/// An isolation episode decides (or raises the group DTC) only while a residual test has failed
+/// within this time (s): the tests re-arm at each failure, so a fault still present fails them
+/// again within a fraction of a second.
+const ALARM_ACTIVE_S: f64 = 1.0;
+/// Segments of its last change a moving estimate is given in the circuit checks.
+const ESTIMATE_SETTLE_SEGMENTS: f64 = 10.0;
+/// A refit that leaves less than this fraction of a decided fault's error is its healing.
+const HEALED_FRACTION: f64 = 0.25;
+
+/// Number of events.
+pub const EVENTS: usize = 10;
 
 /// Event names, in the order of the DTC settings.
-pub const EVENT_NAMES: [&str; 9] = [
+pub const EVENT_NAMES: [&str; EVENTS] = [
     "map_range_performance",
     "map_circuit_low",
     "map_circuit_high",
@@ -94,21 +146,29 @@ pub const EVENT_NAMES: [&str; 9] = [
     "egr_flow_insufficient",
     "egr_flow_excessive",
     "intake_leak",
+    "intake_air_path_group",
 ];
+
+/// The group event: detected, not isolated yet (its candidates are the hypotheses left).
+pub const GROUP_EVENT: &str = "intake_air_path_group";
+const GROUP: usize = 9;
 
 /// The fault classes of the monitor's diagnosis output: the isolation bank's hypotheses
 /// ([`IntakeFault::name`], in the order of [`ALL_FAULTS`]).
 pub const FAULT_CLASSES: [&str; 4] = ["map_sensor", "maf_sensor", "egr_valve", "manifold_leak"];
 
-/// What the monitor named this operation cycle.
+/// A fault the monitor has named and that has not healed.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum IntakeDecision {
-    /// A residual fault isolated by the hypothesis bank, with its fitted size.
+    /// A residual fault isolated by the hypothesis bank, with its fitted size (refined by later
+    /// refits).
     Residual { fit: Fit, event: usize },
     /// A circuit range fault (event index into [`EVENT_NAMES`]).
     Circuit { event: usize },
     /// A sensor whose reading is frozen (stuck): its range/performance event.
     Frozen { event: usize },
+    /// A sensor whose noise has grown: its range/performance event.
+    Noisy { event: usize },
 }
 
 impl IntakeDecision {
@@ -117,7 +177,8 @@ impl IntakeDecision {
         match *self {
             IntakeDecision::Residual { event, .. }
             | IntakeDecision::Circuit { event }
-            | IntakeDecision::Frozen { event } => event,
+            | IntakeDecision::Frozen { event }
+            | IntakeDecision::Noisy { event } => event,
         }
     }
 
@@ -271,6 +332,8 @@ impl NisWindow {
 #[derive(Debug, Clone, Copy)]
 struct Episode {
     alarm_s: f64,
+    /// The last time a residual test failed during the episode (s).
+    last_alarm_s: f64,
     cmd_sum: f64,
     segments: u64,
 }
@@ -281,6 +344,118 @@ enum OutputFilter {
     Primary,
     MapLocal,
     MafLocal,
+}
+
+/// MAP (0) and MAF (1): the index of the per-sensor state.
+const MAP: usize = 0;
+const MAF: usize = 1;
+
+/// What is decided about one sensor by its own checks (circuit, frozen, noise).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct SensorState {
+    low: bool,
+    high: bool,
+    frozen: bool,
+    noisy: bool,
+    /// Time (s) the sensor has read plausibly since it last did not (for healing).
+    healthy_s: f64,
+    /// Segments in a row its reading has been kept out of the filters.
+    out_run: u32,
+}
+
+impl SensorState {
+    fn any(&self) -> bool {
+        self.low || self.high || self.frozen || self.noisy
+    }
+}
+
+/// A residual fault decided and not healed.
+#[derive(Debug, Clone, Copy)]
+struct ResidualFault {
+    /// As decided (the size refined by later refits).
+    fit: Fit,
+    event: usize,
+    comp: Compensation,
+    /// CUSUM of the log-likelihood ratio of "gone" against "still there".
+    heal_llr: f64,
+    /// Time (s) the heal statistic has been at its threshold while the residuals without the
+    /// fault's effect look fault-free.
+    gone_s: f64,
+    /// Exponentially weighted means (over heal_s) of the normalized pressure and throttle-flow
+    /// residuals with this fault's effect added back (what they would be without its
+    /// accommodation): near zero once it has gone; a fault still there but sized wrongly at a
+    /// new operating point leaves them off zero.
+    raw_p: f64,
+    raw_w: f64,
+}
+
+/// An exponentially weighted ratio `sum num / sum den`, learned over a time constant.
+#[derive(Debug, Clone, Copy, Default)]
+struct LearnedRatio {
+    num: f64,
+    den: f64,
+    /// Learning time (s).
+    time_s: f64,
+}
+
+impl LearnedRatio {
+    fn update(&mut self, num: f64, den: f64, dt: f64, tau: f64) {
+        if !(num.is_finite() && den.is_finite() && den > 0.0) {
+            return;
+        }
+        let a = (-dt / tau).exp();
+        self.num = a * self.num + num * dt;
+        self.den = a * self.den + den * dt;
+        self.time_s += dt;
+    }
+
+    fn value(&self, limit: f64) -> f64 {
+        if self.den > 0.0 {
+            (self.num / self.den).clamp(1.0 - limit, 1.0 + limit)
+        } else {
+            1.0
+        }
+    }
+}
+
+/// The noise test of one sensor: the learned level of its normalized squared innovation and a
+/// CUSUM of the log-likelihood ratio of a larger variance.
+#[derive(Debug, Clone, Copy)]
+struct NoiseTest {
+    /// The sensor's noise variance relative to the configured R (learned: the exponentially
+    /// weighted mean of `excess`, so the first estimates are plain means).
+    level: f64,
+    learned: LearnedRatio,
+    cusum: f64,
+    /// This segment's capped normalized squared innovation (NaN: none).
+    z2: f64,
+    /// This segment's squared innovation less its prediction part, relative to R (what the
+    /// level learns from; NaN: none).
+    excess: f64,
+}
+
+impl Default for NoiseTest {
+    fn default() -> Self {
+        Self {
+            level: 1.0,
+            learned: LearnedRatio::default(),
+            cusum: 0.0,
+            z2: f64::NAN,
+            excess: f64::NAN,
+        }
+    }
+}
+
+/// What a segment's filters offer the learned corrections, applied after the decision (only a
+/// quiet segment teaches).
+#[derive(Debug, Clone, Copy)]
+struct LearnSample {
+    /// MAF the MAP-only filter implies and the MAF reading (kg/s).
+    implied_maf: f64,
+    maf: f64,
+    /// Corrected MAF and the throttle model's lagged flow (kg/s), while choked; NaN otherwise.
+    choked_maf: f64,
+    choked_model: f64,
 }
 
 type Central = Ekf<IntakeModel, MapMafSensors, 6, 2, 3>;
@@ -326,22 +501,63 @@ pub struct IntakeMonitor {
     maf_frozen_run: u32,
     last_map: f64,
     last_maf: f64,
+    /// The readings before the last (for the noise tests' second differences).
+    prev_map: f64,
+    prev_maf: f64,
+    /// Their second differences this segment.
+    map_d2: f64,
+    maf_d2: f64,
+    /// Rates of change of the readings (Pa/s, kg/s per s) over the last segment.
+    map_rate: f64,
+    maf_rate: f64,
+    /// Throttle opening of the last segment and segments since it last moved fast.
+    last_throttle: f64,
+    throttle_steady_run: u32,
     map_low_run: u32,
     map_high_run: u32,
     maf_low_run: u32,
     maf_high_run: u32,
+    /// Per sensor (MAP, MAF): its own decisions.
+    sensors: [SensorState; 2],
+    /// Learned corrections: MAF to implied flow, throttle model to MAF.
+    maf_ratio: LearnedRatio,
+    throttle_ratio: LearnedRatio,
+    /// Noise tests (MAP, MAF).
+    noise: [NoiseTest; 2],
+    /// Time (s) the residual tests still wait after the filters started again.
+    settle_s: f64,
+    /// The centralized EKF's estimate of the sensors' outputs (p_mes, W_mes) before the last
+    /// segment's step (for the circuit checks' settling allowance).
+    est_prev: [f64; 2],
+    /// What this segment's filters offer the learned corrections.
+    learn: Option<LearnSample>,
     history: RecordRing,
     scan: OnsetScan,
     /// The isolation's state this segment: PreFailed while an episode is open (value: the lead
     /// of the best hypothesis over the runner-up), Failed when it names a fault.
     isolation: TestResult,
     episode: Option<Episode>,
-    decided: Option<IntakeDecision>,
-    deciding: TestResult,
-    candidates: [(&'static str, f64); 4],
+    /// Residual faults decided and not healed, per hypothesis ([`IntakeFault::index`]).
+    residual: [Option<ResidualFault>; 4],
+    /// The group DTC fails (detected, not isolated).
+    group: bool,
+    /// Per event: the test result that qualified its fault and the isolation candidates.
+    ev_result: [TestResult; EVENTS],
+    ev_cands: [[(&'static str, f64); 4]; EVENTS],
+    ev_ncand: [usize; EVENTS],
     /// The diagnosis scores of the latest segment (see [`Output::Diagnosis`]).
     scores: [f64; 4],
     events: MonitorEvents,
+}
+
+/// What the residual tests gave this segment.
+#[derive(Debug, Clone, Copy, Default)]
+struct ResidualOutcome {
+    /// The residual tests ran (both sensors in use, the corrections learned, the filters
+    /// settled).
+    tested: bool,
+    /// The earliest onset estimate of the tests failing this segment.
+    alarm: Option<u64>,
 }
 
 impl IntakeMonitor {
@@ -378,6 +594,14 @@ impl IntakeMonitor {
             ("nis_threshold", cfg.nis_threshold),
             ("isolation_min_glr", cfg.isolation_min_glr),
             ("isolation_max_s", cfg.isolation_max_s),
+            ("adapt_time_s", cfg.adapt_time_s),
+            ("noise_threshold", cfg.noise_threshold),
+            ("noise_cap", cfg.noise_cap),
+            (
+                "noise_max_throttle_rate_deg_s",
+                cfg.noise_max_throttle_rate_deg_s,
+            ),
+            ("residual_heal_llr", cfg.residual_heal_llr),
         ] {
             if !(v > 0.0 && v.is_finite()) {
                 return Err(setting(key, format!("{v} must be a positive number")));
@@ -386,15 +610,36 @@ impl IntakeMonitor {
         for (key, v) in [
             ("map_low_pa", cfg.map_low_pa),
             ("map_low_margin_pa", cfg.map_low_margin_pa),
+            ("map_high_margin_pa", cfg.map_high_margin_pa),
             ("maf_low_kg_s", cfg.maf_low_kg_s),
             ("maf_low_margin_kg_s", cfg.maf_low_margin_kg_s),
             ("throttle_model_rel", cfg.throttle_model_rel),
+            ("pressure_model_rel", cfg.pressure_model_rel),
+            ("flow_model_rel", cfg.flow_model_rel),
+            ("transient_tolerance_s", cfg.transient_tolerance_s),
+            ("ambient_pressure_std_pa", cfg.ambient_pressure_std_pa),
+            ("adapt_min_s", cfg.adapt_min_s),
             ("isolation_margin", cfg.isolation_margin),
+            ("isolation_margin_rel", cfg.isolation_margin_rel),
             ("isolation_min_s", cfg.isolation_min_s),
+            ("group_after_s", cfg.group_after_s),
+            ("group_margin", cfg.group_margin),
+            ("group_margin_rel", cfg.group_margin_rel),
+            ("heal_s", cfg.heal_s),
+            ("episode_quiet_s", cfg.episode_quiet_s),
         ] {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(setting(key, format!("{v} must be a number >= 0")));
             }
+        }
+        if !(cfg.adapt_limit >= 0.0 && cfg.adapt_limit < 0.5) {
+            return Err(setting("adapt_limit", "must lie in [0, 0.5)"));
+        }
+        if !(cfg.noise_ratio > 1.0 && cfg.noise_ratio.is_finite()) {
+            return Err(setting("noise_ratio", "must be a number > 1"));
+        }
+        if !(cfg.noise_learn_limit >= 1.0 && cfg.noise_learn_limit.is_finite()) {
+            return Err(setting("noise_learn_limit", "must be a number >= 1"));
         }
         if cfg.nis_window == 0 || cfg.nis_window > NIS_RING {
             return Err(setting("nis_window", format!("must be 1..={NIS_RING}")));
@@ -425,6 +670,7 @@ impl IntakeMonitor {
             &cfg.dtc_egr_insufficient,
             &cfg.dtc_egr_excessive,
             &cfg.dtc_leak,
+            &cfg.dtc_group,
         ];
         let specs: Vec<EventSpec<'_>> = EVENT_NAMES
             .iter()
@@ -468,17 +714,34 @@ impl IntakeMonitor {
             maf_frozen_run: 0,
             last_map: f64::NAN,
             last_maf: f64::NAN,
+            prev_map: f64::NAN,
+            prev_maf: f64::NAN,
+            map_d2: f64::NAN,
+            maf_d2: f64::NAN,
+            map_rate: 0.0,
+            maf_rate: 0.0,
+            last_throttle: f64::NAN,
+            throttle_steady_run: 0,
             map_low_run: 0,
             map_high_run: 0,
             maf_low_run: 0,
             maf_high_run: 0,
+            sensors: [SensorState::default(); 2],
+            maf_ratio: LearnedRatio::default(),
+            throttle_ratio: LearnedRatio::default(),
+            noise: [NoiseTest::default(); 2],
+            settle_s: 0.0,
+            est_prev: [f64::NAN; 2],
+            learn: None,
             history: RecordRing::new(HISTORY),
             scan: OnsetScan::default(),
             isolation: TestResult::NOT_TESTED,
             episode: None,
-            decided: None,
-            deciding: TestResult::NOT_TESTED,
-            candidates: [("", 0.0); 4],
+            residual: [None; 4],
+            group: false,
+            ev_result: [TestResult::NOT_TESTED; EVENTS],
+            ev_cands: [[("", 0.0); 4]; EVENTS],
+            ev_ncand: [0; EVENTS],
             scores: [0.0; 4],
             events,
             inputs,
@@ -492,15 +755,52 @@ impl IntakeMonitor {
         Ok(monitor)
     }
 
-    /// The fault named this operation cycle, if any.
+    /// One fault named and not healed (a residual fault first, then a circuit, a frozen and a
+    /// noisy sensor, MAP before MAF); see [`IntakeMonitor::decisions`] for all.
     pub fn decision(&self) -> Option<IntakeDecision> {
-        self.decided
+        self.decisions().flatten().next()
+    }
+
+    /// Every fault named and not healed: the residual faults in hypothesis order, then per
+    /// sensor (MAP, MAF) its circuit, frozen and noisy faults.
+    pub fn decisions(&self) -> impl Iterator<Item = Option<IntakeDecision>> + '_ {
+        let residual = self.residual.iter().map(|r| {
+            r.map(|r| IntakeDecision::Residual {
+                fit: r.fit,
+                event: r.event,
+            })
+        });
+        let sensors = self.sensors.iter().enumerate().flat_map(|(i, s)| {
+            let base = 3 * i;
+            [
+                s.low.then_some(IntakeDecision::Circuit { event: base + 1 }),
+                s.high
+                    .then_some(IntakeDecision::Circuit { event: base + 2 }),
+                s.frozen.then_some(IntakeDecision::Frozen { event: base }),
+                s.noisy.then_some(IntakeDecision::Noisy { event: base }),
+            ]
+        });
+        residual.chain(sensors)
     }
 
     /// The hypotheses ranked by their statistic, as of the last segment of the current or last
     /// isolation episode.
     pub fn ranked_hypotheses(&self) -> [Fit; 4] {
         self.scan.ranked()
+    }
+
+    /// The learned corrections: the factor on the MAF reading and the factor on the throttle
+    /// model's flow (1 before anything is learned).
+    pub fn learned_corrections(&self) -> (f64, f64) {
+        (
+            self.maf_ratio.value(self.cfg.adapt_limit),
+            self.throttle_ratio.value(self.cfg.adapt_limit),
+        )
+    }
+
+    /// Whether the group DTC fails now.
+    pub fn group_failed(&self) -> bool {
+        self.group
     }
 
     /// Segments processed, skipped for a refused input or reading, and refused by a filter.
@@ -555,34 +855,8 @@ impl IntakeMonitor {
         Ok(())
     }
 
-    fn report_all(
-        &mut self,
-        now_s: f64,
-        verdicts: [Verdict; 9],
-        values: FreezeValues<'_>,
-        out: &mut OutputSink<'_>,
-    ) {
-        let n = if self.decided.is_some() {
-            self.candidates
-                .iter()
-                .take_while(|c| !c.0.is_empty())
-                .count()
-        } else {
-            0
-        };
-        let candidates = self.candidates;
-        self.events.report(
-            now_s,
-            &verdicts,
-            &self.deciding,
-            &candidates[..n],
-            values,
-            out,
-        );
-    }
-
     /// Circuit range check of one reading: updates the run counters and says whether the
-    /// reading is usable.
+    /// reading is in range.
     fn circuit(run_low: &mut u32, run_high: &mut u32, low: bool, high: bool) -> bool {
         *run_low = if low { *run_low + 1 } else { 0 };
         *run_high = if high { *run_high + 1 } else { 0 };
@@ -656,6 +930,26 @@ impl IntakeMonitor {
             });
             return;
         }
+        let dt = IntakeModel::segment_dt(seg.speed_rpm);
+
+        // Rates of change of the readings (for the residuals' transient allowance).
+        let rate = |v: f64, last: f64| {
+            if last.is_finite() {
+                (v - last) / dt
+            } else {
+                0.0
+            }
+        };
+        self.map_rate = rate(seg.map_pa, self.last_map);
+        self.maf_rate = rate(seg.maf_kg_s, self.last_maf);
+        let fast = rate(seg.throttle_deg, self.last_throttle).abs()
+            > self.cfg.noise_max_throttle_rate_deg_s;
+        self.last_throttle = seg.throttle_deg;
+        self.throttle_steady_run = if fast {
+            0
+        } else {
+            self.throttle_steady_run.saturating_add(1)
+        };
 
         // Frozen readings: a sensor stuck at one value (the ADC code of a live sensor moves
         // with its noise every segment).
@@ -669,6 +963,9 @@ impl IntakeMonitor {
         } else {
             0
         };
+        self.map_d2 = seg.map_pa - 2.0 * self.last_map + self.prev_map;
+        self.maf_d2 = seg.maf_kg_s - 2.0 * self.last_maf + self.prev_maf;
+        (self.prev_map, self.prev_maf) = (self.last_map, self.last_maf);
         (self.last_map, self.last_maf) = (seg.map_pa, seg.maf_kg_s);
 
         let frozen_result = |run: u32, limit: u32| TestResult {
@@ -692,30 +989,58 @@ impl IntakeMonitor {
 
         // Circuit range checks (the readings that fail them never reach the filters).
         let p_a = self.model.params().ambient_pressure_pa;
-        // A low reading counts against the sensor only where the model rules such a value
-        // out (NaN always does): the filter's estimate of the sensor's output (p_mes, W_mes),
-        // less 3 sigma, above the limit plus a margin; before the filters run, the model's
-        // steady state for this segment's inputs above it (computed only for a low reading).
-        let ruled_out = |i: usize, limit: f64| match &self.filters {
+        // A reading beyond a limit counts against the sensor only where the model rules such a
+        // value out (NaN always does): low, the filter's estimate of the sensor's output
+        // (p_mes, W_mes) less 3 sigma above the limit plus a margin; high, that estimate plus 3
+        // sigma below the limit less a margin. Before the filters run, the model's steady state
+        // for this segment's inputs stands for the estimate (computed only for such a reading).
+        // While the estimate still moves (a tip-in or tip-out the filters follow from the
+        // other sensor alone), it is given ESTIMATE_SETTLE_SEGMENTS of its last change more.
+        let est_prev = self.est_prev;
+        let ruled_out = |i: usize, limit: f64, above: bool| match &self.filters {
             Some(f) => {
                 let sigma = f.central.covariance()[(i, i)].max(0.0).sqrt();
-                f.central.state()[i] - 3.0 * sigma > limit
+                let x = f.central.state()[i];
+                let prev = if i == 1 { est_prev[0] } else { est_prev[1] };
+                let moving = if prev.is_finite() {
+                    ESTIMATE_SETTLE_SEGMENTS * (x - prev).abs()
+                } else {
+                    0.0
+                };
+                if above {
+                    x - 3.0 * sigma - moving > limit
+                } else {
+                    x + 3.0 * sigma + moving < limit
+                }
             }
-            None => self.model.equilibrium(&u).is_none_or(|x| x[i] > limit),
+            None => self.model.equilibrium(&u).is_none_or(|x| {
+                if above {
+                    x[i] > limit
+                } else {
+                    x[i] < limit
+                }
+            }),
         };
+        let map_high_limit = self.cfg.map_high_ratio * p_a;
         let map_low = seg.map_pa.is_nan()
             || (seg.map_pa < self.cfg.map_low_pa
-                && ruled_out(1, self.cfg.map_low_pa + self.cfg.map_low_margin_pa));
+                && ruled_out(1, self.cfg.map_low_pa + self.cfg.map_low_margin_pa, true));
+        let map_high = seg.map_pa > map_high_limit
+            && ruled_out(1, map_high_limit - self.cfg.map_high_margin_pa, false);
         let maf_low = seg.maf_kg_s.is_nan()
             || (seg.maf_kg_s < self.cfg.maf_low_kg_s
-                && ruled_out(3, self.cfg.maf_low_kg_s + self.cfg.maf_low_margin_kg_s));
-        let map_ok = Self::circuit(
+                && ruled_out(
+                    3,
+                    self.cfg.maf_low_kg_s + self.cfg.maf_low_margin_kg_s,
+                    true,
+                ));
+        let map_in_range = Self::circuit(
             &mut self.map_low_run,
             &mut self.map_high_run,
             map_low,
-            seg.map_pa > self.cfg.map_high_ratio * p_a,
+            map_high,
         );
-        let maf_ok = Self::circuit(
+        let maf_in_range = Self::circuit(
             &mut self.maf_low_run,
             &mut self.maf_high_run,
             maf_low,
@@ -730,148 +1055,724 @@ impl IntakeMonitor {
         out(Output::Test {
             test: "intake_map_circuit",
             result: circuit_result(
-                map_ok,
+                map_in_range,
                 seg.map_pa,
                 self.cfg.map_low_pa,
-                self.cfg.map_high_ratio * p_a,
+                map_high_limit,
             ),
         });
         out(Output::Test {
             test: "intake_maf_circuit",
             result: circuit_result(
-                maf_ok,
+                maf_in_range,
                 seg.maf_kg_s,
                 self.cfg.maf_low_kg_s,
                 self.cfg.maf_high_kg_s,
             ),
         });
 
-        let mut residual_alarm: Option<u64> = None;
+        // A reading is used when it lies within the circuit limits (one beyond them never
+        // reaches the filters, whether or not the model rules it out: an open line's 0 V must
+        // not pull them along) and its sensor has no circuit or frozen fault that has not
+        // healed.
+        let map_inside = seg.map_pa >= self.cfg.map_low_pa && seg.map_pa <= map_high_limit;
+        let maf_inside =
+            seg.maf_kg_s >= self.cfg.maf_low_kg_s && seg.maf_kg_s <= self.cfg.maf_high_kg_s;
+        let usable = |s: &SensorState| !(s.low || s.high || s.frozen);
+        let map_ok = map_in_range && map_inside && usable(&self.sensors[MAP]);
+        let maf_ok = maf_in_range && maf_inside && usable(&self.sensors[MAF]);
+        // A sensor back in use after a long absence: the filters start again.
+        let persist = self.cfg.circuit_persist_segments;
+        let mut restart = false;
+        for (s, ok) in [(MAP, map_ok), (MAF, maf_ok)] {
+            let st = &mut self.sensors[s];
+            if ok {
+                restart |= st.out_run >= persist;
+                st.out_run = 0;
+            } else {
+                st.out_run = st.out_run.saturating_add(1);
+            }
+        }
+        if restart {
+            self.filters = None;
+            self.settle_s = RESTART_SETTLE_S;
+            self.close_episode();
+            self.rearm();
+        }
+
+        // Decided residual faults are taken out of what the filters see: the sensors' readings
+        // corrected, the decided EGR position as the model's input, the leak's flow added to
+        // the metered air (not for the throttle-model residual: the throttle does not pass it).
+        let (seg_c, maf_sensor) = self.accommodate(seg, dt);
+        let u_c = IntakeInput::new(seg_c.speed_rpm, seg_c.throttle_deg, seg_c.egr_cmd);
+
+        // The estimate before this segment's step: the next segment's circuit checks see how
+        // much the step moved it.
+        self.est_prev = self.filters.as_ref().map_or([f64::NAN; 2], |f| {
+            let x = f.central.state();
+            [x[X_PMES], x[X_WMES]]
+        });
+        let mut res = ResidualOutcome::default();
+        self.learn = None;
         if map_ok && maf_ok {
-            if self.filters.is_none() && self.build_filters(&u).is_err() {
+            if self.filters.is_none() && self.build_filters(&u_c).is_err() {
                 self.skipped += 1;
                 return;
             }
-            residual_alarm = self.run_filters(k, &u, seg, out);
+            res = self.run_filters(k, dt, &u_c, &seg_c, maf_sensor, seg.egr_cmd, out);
         } else {
             // A refused reading: the filters go on with the other sensor (a local filter
             // without its sensor runs on the model), no residual test this segment.
             self.skipped += 1;
             if self.filters.is_some() {
-                self.run_filters_partial(&u, seg, map_ok, maf_ok);
+                let maf_f = seg_c.maf_kg_s * self.maf_ratio.value(self.cfg.adapt_limit);
+                self.run_filters_partial(&u_c, seg_c.map_pa, maf_f, map_ok, maf_ok);
             }
         }
+        self.settle_s = (self.settle_s - dt).max(0.0);
 
         self.isolation = TestResult::NOT_TESTED;
-        self.decide(now_s, k, seg, residual_alarm);
+        let mut group_passed = false;
+        // A reading repeated beyond a circuit limit is a circuit fault in the making (an open
+        // or shorted line reads its rail exactly): the frozen check waits for that judgement.
+        self.decide_sensors(
+            dt,
+            [map_in_range, maf_in_range],
+            [map_inside, maf_inside],
+            &mut group_passed,
+        );
+        self.decide_residual(now_s, k, dt, seg, &res, &mut group_passed);
         if self.isolation.verdict != Verdict::NotTested {
             out(Output::Test {
                 test: "intake_isolation",
                 result: self.isolation,
             });
         }
+        self.learn_corrections(dt, &res);
 
-        let mut verdicts = [Verdict::NotTested; 9];
-        match self.decided {
-            Some(d) => verdicts[d.event()] = Verdict::Failed,
-            None if self.episode.is_none()
-                && self.map_low_run == 0
-                && self.map_high_run == 0
-                && self.maf_low_run == 0
-                && self.maf_high_run == 0 =>
-            {
-                verdicts = [Verdict::Passed; 9];
+        let quiet = res.tested && res.alarm.is_none() && self.episode.is_none();
+        let mut verdicts = [Verdict::NotTested; EVENTS];
+        let runs = [
+            (self.map_low_run, self.map_high_run, self.map_frozen_run),
+            (self.maf_low_run, self.maf_high_run, self.maf_frozen_run),
+        ];
+        let pick = |failed: bool, passed: bool| {
+            if failed {
+                Verdict::Failed
+            } else if passed {
+                Verdict::Passed
+            } else {
+                Verdict::NotTested
             }
-            None => {}
+        };
+        for (s, fault) in [(MAP, IntakeFault::MapSensor), (MAF, IntakeFault::MafSensor)] {
+            let st = self.sensors[s];
+            let (low, high, frozen) = runs[s];
+            let base = 3 * s;
+            verdicts[base + 1] = pick(st.low, low == 0);
+            verdicts[base + 2] = pick(st.high, high == 0);
+            verdicts[base] = pick(
+                st.frozen || st.noisy || self.residual[fault.index()].is_some(),
+                quiet && frozen == 0,
+            );
         }
+        let egr = self.residual[IntakeFault::EgrValve.index()].map(|f| f.event);
+        verdicts[6] = pick(egr == Some(6), quiet && egr.is_none());
+        verdicts[7] = pick(egr == Some(7), quiet && egr.is_none());
+        verdicts[8] = pick(self.residual[IntakeFault::Leak.index()].is_some(), quiet);
+        verdicts[GROUP] = pick(self.group, quiet || group_passed);
+
         let est = self.estimate(seg, map_ok, maf_ok);
         let values = FreezeValues {
             signals,
             estimates: &est.as_ref().map_or([f64::NAN; 2], |e| [e.pm, e.w]),
         };
-        self.report_all(now_s, verdicts, values, out);
+        for (e, verdict) in verdicts.into_iter().enumerate() {
+            let failed = verdict == Verdict::Failed;
+            let result = if failed {
+                TestResult {
+                    verdict,
+                    ..self.ev_result[e]
+                }
+            } else {
+                TestResult {
+                    value: 0.0,
+                    min: 0.0,
+                    max: 0.0,
+                    verdict,
+                }
+            };
+            let cands = self.ev_cands[e];
+            let n = if failed { self.ev_ncand[e] } else { 0 };
+            self.events
+                .report_one(e, now_s, &result, &cands[..n], values, out);
+        }
         if let Some(e) = est {
             e.emit(out);
         }
-        let flagged = self.diagnose(residual_alarm.is_some());
+        let flagged = self.diagnose(res.alarm.is_some());
         out(Output::Diagnosis {
             flagged,
             scores: &self.scores,
         });
     }
 
-    /// This segment's diagnosis scores (into `self.scores`); returns whether it is flagged.
-    /// Flagged while a fault is decided, an isolation episode is open, a residual test fails or
-    /// a circuit check fails. The scores are the decided fault's candidates; during an episode,
-    /// the hypotheses' GLR statistics normalized to sum to 1; for a circuit or frozen-reading
-    /// fault, all on the sensor.
-    fn diagnose(&mut self, residual_alarm: bool) -> bool {
-        self.scores = [0.0; 4];
-        let sensor = |event: usize| {
-            if event < 3 {
-                IntakeFault::MapSensor
-            } else {
-                IntakeFault::MafSensor
-            }
+    /// The segment as the filters see it with the decided residual faults taken out, and the
+    /// MAF reading corrected for a decided MAF fault only (for the throttle-model residual).
+    fn accommodate(&self, seg: &Segment, dt: f64) -> (Segment, f64) {
+        let mut c = *seg;
+        if let Some(f) = &self.residual[IntakeFault::MapSensor.index()] {
+            c.map_pa = f.comp.correct(seg.map_pa, dt);
+        }
+        if let Some(f) = &self.residual[IntakeFault::MafSensor.index()] {
+            c.maf_kg_s = f.comp.correct(seg.maf_kg_s, dt);
+        }
+        let maf_sensor = c.maf_kg_s;
+        if let Some(f) = &self.residual[IntakeFault::EgrValve.index()] {
+            c.egr_cmd = f.comp.parameter;
+        }
+        if let Some(f) = &self.residual[IntakeFault::Leak.index()] {
+            // The leak's flow at the pressure the MAP-only filter estimates (it follows the true
+            // pressure under a leak).
+            let p = self
+                .filters
+                .as_ref()
+                .map_or(c.map_pa, |fl| fl.pair.local1().state()[X_PM]);
+            c.maf_kg_s += f.comp.parameter * self.model.throttle_flow_area(p, 1.0).0;
+        }
+        (c, maf_sensor)
+    }
+
+    /// Records the fault of event `e`: the result that qualified it and its candidates.
+    fn set_event(&mut self, e: usize, result: TestResult, cands: &[(&'static str, f64)]) {
+        self.ev_result[e] = TestResult {
+            verdict: Verdict::Failed,
+            ..result
         };
-        match self.decided {
-            Some(IntakeDecision::Residual { .. }) => {
-                for (name, score) in self.candidates {
-                    if let Some(i) = FAULT_CLASSES.iter().position(|c| *c == name) {
-                        self.scores[i] = score;
+        let n = cands.len().min(4);
+        self.ev_cands[e] = [("", 0.0); 4];
+        self.ev_cands[e][..n].copy_from_slice(&cands[..n]);
+        self.ev_ncand[e] = n;
+    }
+
+    /// The residual tests start from zero (after a decision, a healing or a closed episode:
+    /// what they saw is explained or gone).
+    fn rearm(&mut self) {
+        self.cusum_p.reset();
+        self.cusum_x.reset();
+        self.cusum_t.reset();
+        self.nis_central.clear();
+        self.nis_federated.clear();
+    }
+
+    fn close_episode(&mut self) {
+        self.episode = None;
+    }
+
+    /// Each sensor's own decisions: circuit low/high, frozen, noisy; and their healing.
+    fn decide_sensors(
+        &mut self,
+        dt: f64,
+        in_range: [bool; 2],
+        inside: [bool; 2],
+        group_passed: &mut bool,
+    ) {
+        let persist = self.cfg.circuit_persist_segments;
+        let frozen_limit = self.cfg.frozen_segments;
+        let noise_thr = self.cfg.noise_threshold;
+        let inputs = [
+            (
+                MAP,
+                self.map_low_run,
+                self.map_high_run,
+                self.map_frozen_run,
+                in_range[MAP],
+                IntakeFault::MapSensor,
+            ),
+            (
+                MAF,
+                self.maf_low_run,
+                self.maf_high_run,
+                self.maf_frozen_run,
+                in_range[MAF],
+                IntakeFault::MafSensor,
+            ),
+        ];
+        for (s, low, high, frozen, in_range, fault) in inputs {
+            let noisy = self.noise[s].cusum >= noise_thr;
+            let base = 3 * s;
+            let mut st = self.sensors[s];
+            let mut new: Option<(usize, TestResult, &'static str)> = None;
+            let run_result = |run: u32, limit: u32| TestResult {
+                value: f64::from(run),
+                min: 0.0,
+                max: f64::from(limit.saturating_sub(1)),
+                verdict: Verdict::Failed,
+            };
+            if !st.low && low >= persist {
+                st.low = true;
+                new = Some((base + 1, run_result(low, persist), EVENT_NAMES[base + 1]));
+            } else if !st.high && high >= persist {
+                st.high = true;
+                new = Some((base + 2, run_result(high, persist), EVENT_NAMES[base + 2]));
+            } else if !st.any() && low == 0 && high == 0 && inside[s] && frozen >= frozen_limit {
+                st.frozen = true;
+                new = Some((base, run_result(frozen, frozen_limit), fault.name()));
+            } else if !st.any() && noisy {
+                st.noisy = true;
+                let r = TestResult {
+                    value: self.noise[s].cusum,
+                    min: 0.0,
+                    max: noise_thr,
+                    verdict: Verdict::Failed,
+                };
+                new = Some((base, r, fault.name()));
+            }
+            if let Some((e, result, cand)) = new {
+                tracing::debug!(event = EVENT_NAMES[e], "intake sensor fault");
+                st.healthy_s = 0.0;
+                self.sensors[s] = st;
+                self.set_event(e, result, &[(cand, 1.0)]);
+                // The sensor fault explains a residual alarm, or leaves it untestable.
+                if self.episode.is_some() || self.group {
+                    self.close_episode();
+                    *group_passed |= self.group;
+                    self.group = false;
+                    self.rearm();
+                }
+                continue;
+            }
+            if st.any() {
+                let plausible = in_range && low == 0 && high == 0 && frozen == 0 && !noisy;
+                st.healthy_s = if plausible { st.healthy_s + dt } else { 0.0 };
+                if st.healthy_s >= self.cfg.heal_s {
+                    tracing::debug!(sensor = fault.name(), "intake sensor fault healed");
+                    st = SensorState {
+                        out_run: st.out_run,
+                        ..SensorState::default()
+                    };
+                    self.noise[s].cusum = 0.0;
+                }
+            }
+            self.sensors[s] = st;
+        }
+    }
+
+    /// The residual faults: healing of the decided ones, the isolation episode, the group DTC
+    /// and new decisions.
+    fn decide_residual(
+        &mut self,
+        now_s: f64,
+        k: u64,
+        dt: f64,
+        seg: &Segment,
+        res: &ResidualOutcome,
+        group_passed: &mut bool,
+    ) {
+        let _ = dt;
+        // Healing: the sequential test has favoured "gone" for heal_s.
+        for i in 0..self.residual.len() {
+            if let Some(f) = self.residual[i] {
+                if f.gone_s >= self.cfg.heal_s {
+                    tracing::debug!(
+                        time_s = now_s,
+                        fault = f.fit.fault.name(),
+                        "intake residual fault healed"
+                    );
+                    self.residual[i] = None;
+                    self.close_episode();
+                    *group_passed |= self.group;
+                    self.group = false;
+                    self.rearm();
+                }
+            }
+        }
+        // A decided fault that the sequential test already favours as gone explains what the
+        // residuals do now (its compensation leaves the negative of its effect): no new
+        // episode, and an open one waits, until it has healed.
+        let healing = self.residual.iter().flatten().any(|f| f.gone_s > 0.0);
+        if healing {
+            return;
+        }
+        if self.episode.is_none() {
+            if let Some(onset) = res.alarm {
+                // Refit the hypotheses from the candidate onsets back from the estimate.
+                let earliest = onset
+                    .saturating_sub(ONSET_MARGIN)
+                    .max(k.saturating_sub(ONSET_WINDOW_MAX))
+                    .max(1);
+                self.scan = OnsetScan::with_modes(
+                    earliest,
+                    k,
+                    self.residual[IntakeFault::Leak.index()].is_some(),
+                    false,
+                );
+                let first = self.scan.earliest_onset();
+                let back = (k + 1).saturating_sub(first) as usize;
+                let held = back.min(self.history.len()) as u64;
+                let (mut cmd_sum, mut n) = (0.0, 0u64);
+                for (i, r) in self.history.last(back).enumerate() {
+                    self.scan.push(k + 1 - held + i as u64, r);
+                    cmd_sum += r.egr_cmd;
+                    n += 1;
+                }
+                self.episode = Some(Episode {
+                    alarm_s: now_s,
+                    last_alarm_s: now_s,
+                    cmd_sum,
+                    segments: n,
+                });
+            }
+            return;
+        }
+        let Some(mut ep) = self.episode else {
+            return;
+        };
+        ep.cmd_sum += seg.egr_cmd;
+        ep.segments += 1;
+        // During the episode the tests watch whether the fault is still there: each failure
+        // re-arms them; when they stay quiet for episode_quiet_s the alarm is over.
+        if res.alarm.is_some() {
+            ep.last_alarm_s = now_s;
+            self.rearm();
+        }
+        self.episode = Some(ep);
+        if res.tested && now_s - ep.last_alarm_s >= self.cfg.episode_quiet_s {
+            self.close_episode();
+            *group_passed |= self.group;
+            self.group = false;
+            self.isolation.verdict = Verdict::Passed;
+            return;
+        }
+        let ranked = self.scan.ranked();
+        let elapsed = now_s - ep.alarm_s;
+        let best = ranked[0];
+        let significant = best.glr >= self.cfg.isolation_min_glr;
+        let lead = best.glr - ranked[1].glr;
+        let clear =
+            lead >= self.cfg.isolation_margin && lead >= self.cfg.isolation_margin_rel * best.glr;
+        self.isolation = TestResult {
+            value: best.glr - ranked[1].glr,
+            min: 0.0,
+            max: self.cfg.isolation_margin,
+            verdict: Verdict::PreFailed,
+        };
+        // A repeated reading is a stuck sensor in the making: the frozen check names it.
+        let repeating = self.map_frozen_run > 0 || self.maf_frozen_run > 0;
+        // The hypotheses still in the race: within the group margin of the best.
+        let margin = self
+            .cfg
+            .group_margin
+            .max(self.cfg.group_margin_rel * best.glr);
+        let in_race = |f: &Fit| f.glr > 0.0 && f.glr >= best.glr - margin;
+        // A decided fault still in the race: what is left of it after its compensation (a
+        // size that has changed, a drift) explains the alarm as well as a new fault would.
+        let decided_in_race = ranked
+            .iter()
+            .find(|f| self.residual[f.fault.index()].is_some() && in_race(f))
+            .copied();
+        // Only while the alarm is active: after the tests have gone quiet the statistics hold
+        // data from a fault that may be over.
+        let active = now_s - ep.last_alarm_s <= ALARM_ACTIVE_S;
+        if elapsed >= self.cfg.isolation_min_s && significant && clear && !repeating && active {
+            self.isolation.verdict = Verdict::Failed;
+            let chosen = decided_in_race.unwrap_or(best);
+            self.decide_fault(now_s, seg, &ranked, &chosen, &ep);
+            self.close_episode();
+            *group_passed |= self.group;
+            self.group = false;
+            self.rearm();
+        } else if elapsed >= self.cfg.isolation_max_s && !significant {
+            // Unexplained alarm: no hypothesis is significant. Close the episode.
+            self.close_episode();
+            *group_passed |= self.group;
+            self.group = false;
+            self.isolation.verdict = Verdict::Passed;
+            self.rearm();
+        } else if significant
+            && !self.group
+            && elapsed >= self.cfg.group_after_s
+            && !repeating
+            && active
+        {
+            // Detected but ambiguous: the group DTC, with the hypotheses still in the race.
+            let mut cands = [("", 0.0); 4];
+            let mut n = 0;
+            let mut total = 0.0;
+            let mut known = false;
+            for f in ranked {
+                if in_race(&f) {
+                    cands[n] = (f.fault.name(), f.glr);
+                    total += f.glr;
+                    n += 1;
+                    known |= self.residual[f.fault.index()].is_some();
+                }
+            }
+            // A decided fault among them: its refit is still on its way (not a new fault).
+            if !known && n > 0 {
+                for c in &mut cands[..n] {
+                    c.1 /= total;
+                }
+                let result = TestResult {
+                    value: best.glr - ranked[1].glr,
+                    min: 0.0,
+                    max: self.cfg.isolation_margin,
+                    verdict: Verdict::Failed,
+                };
+                self.set_event(GROUP, result, &cands[..n]);
+                self.group = true;
+                for f in ranked.iter().take(n) {
+                    tracing::debug!(
+                        time_s = now_s,
+                        candidate = f.fault.name(),
+                        glr = f.glr,
+                        parameter = f.parameter,
+                        gain = f.gain,
+                        "intake group DTC candidate"
+                    );
+                }
+            }
+        }
+        // Significant but ambiguous (two faults explain the data equally well, e.g. a leak and
+        // an EGR valve stuck open while the EGR command does not move): the group DTC stands
+        // and the episode goes on until the driving separates them.
+    }
+
+    /// Names the best hypothesis of `ranked`: a new residual fault (its DTC and its
+    /// compensation), or the refinement of one already decided.
+    fn decide_fault(
+        &mut self,
+        now_s: f64,
+        seg: &Segment,
+        ranked: &[Fit; 4],
+        chosen: &Fit,
+        ep: &Episode,
+    ) {
+        let best = *chosen;
+        let i = best.fault.index();
+        if let Some(mut f) = self.residual[i] {
+            let y = match best.fault {
+                IntakeFault::MafSensor => seg.maf_kg_s,
+                _ => seg.map_pa,
+            };
+            let before = f.comp.magnitude(y);
+            f.comp.refine(&best, self.scan.best_bank(best.fault));
+            // A refit that takes back most of the decided error, leaving one within what the
+            // residuals allow for anyway: the fault has healed.
+            let allowed = match best.fault {
+                IntakeFault::MapSensor => {
+                    self.cfg.map_noise_pa.hypot(self.cfg.pressure_model_rel * y)
+                }
+                IntakeFault::MafSensor => {
+                    (self.cfg.maf_noise_rel * y).hypot(self.cfg.flow_model_rel * y)
+                }
+                // The leak's area whose flow at this pressure is within the flow allowance.
+                _ => {
+                    let unit = self.model.throttle_flow_area(seg.map_pa, 1.0).0;
+                    let flow = (self.cfg.maf_noise_rel * seg.maf_kg_s)
+                        .hypot(self.cfg.flow_model_rel * seg.maf_kg_s);
+                    if unit > 0.0 {
+                        flow / unit
+                    } else {
+                        0.0
                     }
                 }
-                return true;
+            };
+            if let (Some(b), Some(a)) = (before, f.comp.magnitude(y)) {
+                if a < HEALED_FRACTION * b && a < 0.5 * allowed {
+                    tracing::debug!(
+                        time_s = now_s,
+                        fault = best.fault.name(),
+                        before = b,
+                        after = a,
+                        allowed,
+                        "intake residual fault healed (refit)"
+                    );
+                    self.residual[i] = None;
+                    return;
+                }
             }
-            Some(IntakeDecision::Circuit { event } | IntakeDecision::Frozen { event }) => {
-                self.scores[sensor(event).index()] = 1.0;
-                return true;
+            f.fit.parameter = f.comp.parameter;
+            f.fit.gain = f.comp.gain;
+            f.fit.offset = f.comp.offset;
+            f.fit.rate = f.comp.rate;
+            f.heal_llr = 0.0;
+            f.gone_s = 0.0;
+            self.residual[i] = Some(f);
+            tracing::debug!(
+                time_s = now_s,
+                fault = best.fault.name(),
+                parameter = f.fit.parameter,
+                "intake fault refined"
+            );
+            return;
+        }
+        let event = match best.fault {
+            IntakeFault::MapSensor => 0,
+            IntakeFault::MafSensor => 3,
+            IntakeFault::EgrValve => {
+                let mean_cmd = ep.cmd_sum / ep.segments.max(1) as f64;
+                if best.parameter < mean_cmd {
+                    6
+                } else {
+                    7
+                }
             }
-            None => {}
+            IntakeFault::Leak => 8,
+        };
+        let total: f64 = ranked
+            .iter()
+            .map(|f| f.glr.max(0.0))
+            .sum::<f64>()
+            .max(1e-12);
+        let mut cands = [("", 0.0); 4];
+        for (c, f) in cands.iter_mut().zip(ranked.iter()) {
+            *c = (f.fault.name(), f.glr.max(0.0) / total);
         }
-        if self.map_low_run > 0 || self.map_high_run > 0 {
-            self.scores[IntakeFault::MapSensor.index()] = 1.0;
-            return true;
+        let result = TestResult {
+            value: best.glr,
+            min: 0.0,
+            max: self.cfg.isolation_min_glr,
+            verdict: Verdict::Failed,
+        };
+        self.set_event(event, result, &cands);
+        self.residual[i] = Some(ResidualFault {
+            fit: best,
+            event,
+            comp: Compensation::new(&best, self.scan.best_bank(best.fault)),
+            heal_llr: 0.0,
+            gone_s: 0.0,
+            raw_p: 0.0,
+            raw_w: 0.0,
+        });
+        tracing::debug!(
+            time_s = now_s,
+            fault = best.fault.name(),
+            parameter = best.parameter,
+            gain = best.gain,
+            glr = best.glr,
+            "intake fault isolated"
+        );
+    }
+
+    /// Learns the corrections and the noise levels from a quiet segment: both sensors in use,
+    /// no test failing, no episode, nothing decided, no reading out of range or repeated.
+    fn learn_corrections(&mut self, dt: f64, res: &ResidualOutcome) {
+        let Some(l) = self.learn else {
+            return;
+        };
+        let quiet = res.alarm.is_none()
+            && self.episode.is_none()
+            && !self.group
+            && self.residual.iter().all(Option::is_none)
+            && !self.sensors.iter().any(SensorState::any)
+            && self.map_low_run + self.map_high_run + self.maf_low_run + self.maf_high_run == 0
+            && self.map_frozen_run == 0
+            && self.maf_frozen_run == 0
+            && self
+                .noise
+                .iter()
+                .all(|n| n.cusum < self.cfg.noise_threshold);
+        if !quiet {
+            return;
         }
-        if self.maf_low_run > 0 || self.maf_high_run > 0 {
-            self.scores[IntakeFault::MafSensor.index()] = 1.0;
-            return true;
+        let tau = self.cfg.adapt_time_s;
+        self.maf_ratio.update(l.implied_maf, l.maf, dt, tau);
+        if l.choked_model.is_finite() {
+            self.throttle_ratio
+                .update(l.choked_maf, l.choked_model, dt, tau);
+        }
+        let lim = self.cfg.noise_learn_limit;
+        let cap = self.cfg.noise_cap;
+        for n in &mut self.noise {
+            if n.excess.is_finite() {
+                n.learned.update(n.excess.min(cap), 1.0, dt, tau);
+                n.level = (n.learned.num / n.learned.den).clamp(1.0 / lim, lim);
+            }
+        }
+    }
+
+    /// This segment's diagnosis scores (into `self.scores`); returns whether it is flagged.
+    /// Flagged while a fault is decided and not healed, an isolation episode is open, a
+    /// residual test fails, a circuit check fails or a noise test fails. A decided fault scores
+    /// 1 for its class (a circuit, frozen or noisy reading: its sensor); the group DTC and an
+    /// open episode score the hypotheses by their GLR statistics normalized to sum to 1; per
+    /// class the largest of these.
+    fn diagnose(&mut self, residual_alarm: bool) -> bool {
+        self.scores = [0.0; 4];
+        let mut flagged = residual_alarm;
+        let runs = [
+            self.map_low_run + self.map_high_run,
+            self.maf_low_run + self.maf_high_run,
+        ];
+        for (s, fault) in [(MAP, IntakeFault::MapSensor), (MAF, IntakeFault::MafSensor)] {
+            if self.sensors[s].any()
+                || runs[s] > 0
+                || self.noise[s].cusum >= self.cfg.noise_threshold
+            {
+                self.scores[fault.index()] = 1.0;
+                flagged = true;
+            }
+        }
+        for f in self.residual.iter().flatten() {
+            self.scores[f.fit.fault.index()] = 1.0;
+            flagged = true;
+        }
+        let add = |scores: &mut [f64; 4], name: &str, v: f64| {
+            if let Some(i) = FAULT_CLASSES.iter().position(|c| *c == name) {
+                scores[i] = scores[i].max(v);
+            }
+        };
+        if self.group {
+            for (name, v) in &self.ev_cands[GROUP][..self.ev_ncand[GROUP]] {
+                add(&mut self.scores, name, *v);
+            }
+            flagged = true;
         }
         if self.episode.is_some() {
             let ranked = self.scan.ranked();
             let total: f64 = ranked.iter().map(|f| f.glr.max(0.0)).sum();
             if total > 0.0 {
                 for f in ranked {
-                    self.scores[f.fault.index()] = f.glr.max(0.0) / total;
+                    add(&mut self.scores, f.fault.name(), f.glr.max(0.0) / total);
                 }
             }
-            return true;
+            flagged = true;
         }
-        residual_alarm
+        flagged
     }
 
-    /// Steps the three filters and the residual tests; returns the first failing residual test
-    /// and its onset segment.
+    /// Steps the three filters, the residual tests and the noise tests.
+    #[allow(clippy::too_many_arguments)]
     fn run_filters(
         &mut self,
         k: u64,
+        dt: f64,
         u: &IntakeInput,
         seg: &Segment,
+        maf_sensor: f64,
+        egr_command: f64,
         out: &mut OutputSink<'_>,
-    ) -> Option<u64> {
-        let filters = self.filters.as_mut()?;
+    ) -> ResidualOutcome {
+        let limit = self.cfg.adapt_limit;
+        let kappa = self.maf_ratio.value(limit);
+        let kappa_t = self.throttle_ratio.value(limit);
+        let maf_f = kappa * seg.maf_kg_s;
+        let tol = self.cfg.transient_tolerance_s;
+        let Some(filters) = self.filters.as_mut() else {
+            return ResidualOutcome::default();
+        };
         let y_map = Vector1::new(seg.map_pa);
-        let y_maf = Vector1::new(seg.maf_kg_s);
-        let central = filters.central.predict(u).and_then(|()| {
-            filters
-                .central
-                .update(&Vector2::new(seg.map_pa, seg.maf_kg_s), u)
-        });
+        let y_maf = Vector1::new(maf_f);
+        let central = filters
+            .central
+            .predict(u)
+            .and_then(|()| filters.central.update(&Vector2::new(seg.map_pa, maf_f), u));
         let pair = filters.pair.step(u, &y_map, &y_maf);
         let fed = filters.federated.step(u, &y_map, &y_maf);
         let (Ok(ci), Ok(ps), Ok(fs)) = (central, pair, fed) else {
             self.rejected += 1;
-            return None;
+            return ResidualOutcome::default();
         };
         out(Output::Innovation {
             filter: "intake_centralized",
@@ -902,30 +1803,44 @@ impl IntakeMonitor {
             dof: fs.dof,
         });
 
+        // Allowances for what the model does not know (see the module docs).
+        let map_trans = (tol * self.map_rate).powi(2);
+        let maf_trans = (tol * kappa * self.maf_rate).powi(2);
+        let maf_noise = (self.cfg.maf_noise_rel * maf_f).powi(2);
+
         // Cross residuals: each local filter predicts the sensor it does not use.
         let (x_maf, p_maf) = (
             filters.pair.local2().state(),
             filters.pair.local2().covariance(),
         );
-        let s_p = (p_maf[(X_PMES, X_PMES)] + self.r_map).sqrt();
+        let s_p = (p_maf[(X_PMES, X_PMES)]
+            + self.r_map
+            + (self.cfg.pressure_model_rel * seg.map_pa).powi(2)
+            + map_trans)
+            .sqrt();
         let z_p = (seg.map_pa - x_maf[X_PMES]) / s_p;
         let (x_map, p_map) = (
             filters.pair.local1().state(),
             filters.pair.local1().covariance(),
         );
-        let s_x = (p_map[(X_WMES, X_WMES)] + self.r_maf).sqrt();
-        let z_x = (seg.maf_kg_s - x_map[X_WMES]) / s_x;
+        let s_x = (p_map[(X_WMES, X_WMES)]
+            + maf_noise
+            + (self.cfg.flow_model_rel * maf_f).powi(2)
+            + maf_trans)
+            .sqrt();
+        let z_x = (maf_f - x_map[X_WMES]) / s_x;
 
         // Throttle-model flow residuals. The throttle flow computed at the MAP reading (lagged
         // like the MAF) depends on the MAF sensor (directly) and on the MAP sensor (through the
         // pressure ratio), but not on the EGR or a leak, which change the true pressure and the
-        // true throttle flow together. Its variance carries the MAP noise through the flow
-        // function's slope, so the near-ambient region, where that slope is steep, weighs
-        // nothing. The test uses it only while the throttle is choked (then it sees the MAF
-        // alone); the isolation bank uses it everywhere, with the MAP hypothesis's signature.
+        // true throttle flow together. Its variance carries the MAP noise and the ambient
+        // pressure's uncertainty through the flow function's slope, so the near-ambient region,
+        // where that slope is steep, weighs nothing. The test uses it only while the throttle
+        // is choked (then it sees the MAF alone); the isolation bank uses it everywhere, with
+        // the MAP hypothesis's signature. The model's flow is scaled by the learned throttle
+        // correction.
         let p = self.model.params();
         let p_hat = filters.central.state()[X_PM];
-        let dt = IntakeModel::segment_dt(seg.speed_rpm);
         let (w_model, dw_dp) = self
             .model
             .throttle_flow_area(seg.map_pa, self.model.throttle_area(seg.throttle_deg));
@@ -935,6 +1850,7 @@ impl IntakeMonitor {
         }
         self.w_model_lag = a * self.w_model_lag + (1.0 - a) * w_model;
         self.dw_dp_lag = a * self.dw_dp_lag + (1.0 - a) * dw_dp;
+        let (w_lag, dw_lag) = (kappa_t * self.w_model_lag, kappa_t * self.dw_dp_lag);
         let choked_limit = self.cfg.choked_ratio * p.ambient_pressure_pa;
         let choked = p_hat < choked_limit && seg.map_pa < choked_limit;
         self.choked_run = if choked { self.choked_run + 1 } else { 0 };
@@ -942,20 +1858,40 @@ impl IntakeMonitor {
         // MAP error to act linearly on the computed flow: no flow residual there.
         let in_range = seg.map_pa < self.cfg.flow_ratio_max * p.ambient_pressure_pa;
         self.flow_run = if in_range { self.flow_run + 1 } else { 0 };
-        let s_w = ((self.cfg.maf_noise_rel * seg.maf_kg_s).powi(2)
-            + (self.cfg.throttle_model_rel * self.w_model_lag).powi(2)
-            + (self.dw_dp_lag * self.cfg.map_noise_pa).powi(2))
-        .sqrt();
+        let ratio = seg.map_pa / p.ambient_pressure_pa;
+        // Until the throttle correction has learned, the model may be off by its whole range.
+        let throttle_ready = self.throttle_ratio.time_s >= self.cfg.adapt_min_s;
+        let model_rel = if throttle_ready {
+            self.cfg.throttle_model_rel
+        } else {
+            self.cfg.throttle_model_rel.hypot(self.cfg.adapt_limit)
+        };
+        let s_w = (maf_noise
+            + (model_rel * w_lag).powi(2)
+            + dw_lag.powi(2)
+                * (self.cfg.map_noise_pa.powi(2)
+                    + (ratio * self.cfg.ambient_pressure_std_pa).powi(2))
+            + maf_trans)
+            .sqrt();
+        // The raw MAF against the throttle model: the learned throttle correction is the ratio
+        // of the two, so the volumetric-efficiency correction (which varies over the operating
+        // points) stays out of this residual.
         let z_flow = if self.flow_run >= CHOKED_SETTLE && s_w > 0.0 {
-            (seg.maf_kg_s - self.w_model_lag) / s_w
+            (maf_sensor - w_lag) / s_w
         } else {
             f64::NAN
         };
-        let z_w = if self.choked_run >= CHOKED_SETTLE {
-            z_flow
-        } else {
-            f64::NAN
-        };
+        let settled_choke = self.choked_run >= CHOKED_SETTLE;
+        self.learn = Some(LearnSample {
+            implied_maf: x_map[X_WMES],
+            maf: maf_sensor,
+            choked_maf: maf_sensor,
+            choked_model: if settled_choke {
+                self.w_model_lag
+            } else {
+                f64::NAN
+            },
+        });
 
         // Linearized manifold response over this segment (for the hypothesis bank). The flows
         // a leak or the EGR would add are evaluated at the MAP-only local filter's pressure: it
@@ -977,32 +1913,120 @@ impl IntakeMonitor {
             s_p,
             z_w: z_flow,
             s_w,
-            map_flow_gain: self.dw_dp_lag,
+            map_flow_gain: dw_lag,
             decay: z.exp(),
             input_gain: self.gain * dt * phi1(z),
-            maf: seg.maf_kg_s,
+            maf: maf_f,
             egr_full: self.model.egr_flow_area(p_true, p.egr_max_area_m2).0,
             egr_cmd: seg.egr_cmd,
             leak_unit: self.model.throttle_flow_area(p_true, 1.0).0,
             p_ref: x_maf[X_PM],
+            dt,
         };
+
+        // Decided residual faults (already taken out of the filters' inputs): the sequential
+        // test of "gone" against "still there" moves with their predicted effect on the raw
+        // residuals (what removing them would leave), computed with the real EGR command.
+        let clip = self.cfg.clip_sigma;
+        let raw = SegmentRecord {
+            egr_cmd: egr_command,
+            ..record
+        };
+        let heal_thr = self.cfg.residual_heal_llr;
+        let z_p_c = z_p;
+        let z_flow_c = z_flow;
+        for f in self.residual.iter_mut().flatten() {
+            let c = f.comp.step(&raw);
+            // LLR of "gone" (the residual then carries minus this effect) against "still there".
+            let llr = |zc: f64, c: f64| {
+                let zc = zc.clamp(-clip, clip);
+                -c * (2.0 * zc + c) / 2.0
+            };
+            let mut inc = llr(z_p_c, c.0 / s_p);
+            let a = (-dt / self.cfg.heal_s.max(dt)).exp();
+            f.raw_p = a * f.raw_p + (1.0 - a) * (z_p_c + c.0 / s_p).clamp(-clip, clip);
+            if z_flow_c.is_finite() {
+                inc += llr(z_flow_c, c.1 / s_w);
+                f.raw_w = a * f.raw_w + (1.0 - a) * (z_flow_c + c.1 / s_w).clamp(-clip, clip);
+            }
+            f.heal_llr = (f.heal_llr + inc).clamp(0.0, 2.0 * heal_thr);
+            let raw_quiet = f.raw_p.abs() < 1.0 && f.raw_w.abs() < 1.0;
+            f.gone_s = if f.heal_llr >= heal_thr && raw_quiet {
+                f.gone_s + dt
+            } else {
+                0.0
+            };
+        }
         self.history.push(record);
         if self.episode.is_some() {
             self.scan.push(k, &record);
         }
 
-        let clip = self.cfg.clip_sigma;
-        let (rp, onset_p) = self.cusum_p.step(k, z_p.clamp(-clip, clip), true);
-        let (rx, onset_x) = self.cusum_x.step(k, z_x.clamp(-clip, clip), true);
-        let (rt, onset_t) = self
-            .cusum_t
-            .step(k, z_w.clamp(-clip, clip), z_w.is_finite());
+        // Noise tests on the local filters' innovations.
+        let ready = self.maf_ratio.time_s >= self.cfg.adapt_min_s && self.settle_s <= 0.0;
+        let steady = self.throttle_steady_run > self.cfg.noise_settle_segments;
+        // The second difference of each reading: a live signal's change over three segments
+        // is nearly linear outside transients (which the test skips), so what is left is the
+        // sensor's noise, variance 6 R (R relative to the reading for the MAF).
+        let cap = self.cfg.noise_cap;
+        let v = self.cfg.noise_ratio;
+        let noise_thr = self.cfg.noise_threshold;
+        let second = [(self.map_d2, self.r_map), (self.maf_d2, maf_noise)];
+        let tests = ["intake_map_noise", "intake_maf_noise"];
+        let adapt_min = self.cfg.adapt_min_s;
+        for ((n, (d2, r)), test) in self.noise.iter_mut().zip(second).zip(tests) {
+            let ok = steady && d2.is_finite() && r > 0.0;
+            let excess = d2 * d2 / (6.0 * r);
+            n.z2 = if ok {
+                (excess / n.level).min(cap)
+            } else {
+                f64::NAN
+            };
+            n.excess = if ok { excess } else { f64::NAN };
+            let result = if ready && n.learned.time_s >= adapt_min && n.z2.is_finite() {
+                let inc = 0.5 * ((1.0 - 1.0 / v) * n.z2 - v.ln());
+                n.cusum = (n.cusum + inc).clamp(0.0, 2.0 * noise_thr);
+                TestResult {
+                    value: n.cusum,
+                    min: 0.0,
+                    max: noise_thr,
+                    verdict: if n.cusum >= noise_thr {
+                        Verdict::Failed
+                    } else {
+                        Verdict::Passed
+                    },
+                }
+            } else {
+                TestResult::NOT_TESTED
+            };
+            out(Output::Test { test, result });
+        }
+
+        // Residual tests: after the corrections have learned, not while a noisy sensor is
+        // decided; while a residual fault is taken out of the residuals only the pressure and
+        // throttle-model tests (their residuals are the ones compensated) raise alarms.
+        let enabled = ready && !self.sensors.iter().any(|s| s.noisy);
+        let compensating = self.residual.iter().any(Option::is_some);
+        let (rp, onset_p) = self.cusum_p.step(k, z_p_c.clamp(-clip, clip), enabled);
+        let (rx, onset_x) = self
+            .cusum_x
+            .step(k, z_x.clamp(-clip, clip), enabled && !compensating);
+        // The throttle-model test only once the throttle correction has learned.
+        let z_w = if settled_choke && throttle_ready {
+            z_flow_c
+        } else {
+            f64::NAN
+        };
+        let (rt, onset_t) =
+            self.cusum_t
+                .step(k, z_w.clamp(-clip, clip), enabled && z_w.is_finite());
         let rc = self
             .nis_central
             .step(ci.nis, self.cfg.nis_cap, self.cfg.nis_threshold);
         let rf = self
             .nis_federated
             .step(fs.nis, self.cfg.nis_cap, self.cfg.nis_threshold);
+        let nis_counts = enabled && !compensating;
         let window_onset = k.saturating_sub(self.cfg.nis_window as u64 - 1);
         let tests = [
             ("intake_pressure_consistency", rp, onset_p),
@@ -1011,12 +2035,12 @@ impl IntakeMonitor {
             (
                 "intake_centralized_nis",
                 rc,
-                (rc.verdict == Verdict::Failed).then_some(window_onset),
+                (nis_counts && rc.verdict == Verdict::Failed).then_some(window_onset),
             ),
             (
                 "intake_federated_nis",
                 rf,
-                (rf.verdict == Verdict::Failed).then_some(window_onset),
+                (nis_counts && rf.verdict == Verdict::Failed).then_some(window_onset),
             ),
         ];
         // The earliest onset estimate of the tests that fail this segment.
@@ -1027,155 +2051,29 @@ impl IntakeMonitor {
                 alarm = Some(alarm.map_or(o, |a| a.min(o)));
             }
         }
-        alarm
-    }
-
-    fn decide(&mut self, now_s: f64, k: u64, seg: &Segment, residual_alarm: Option<u64>) {
-        if self.decided.is_some() {
-            return;
+        ResidualOutcome {
+            tested: enabled,
+            alarm,
         }
-        let persist = self.cfg.circuit_persist_segments;
-        let circuit = [
-            (self.map_low_run, 1),
-            (self.map_high_run, 2),
-            (self.maf_low_run, 4),
-            (self.maf_high_run, 5),
-        ];
-        for (run, event) in circuit {
-            if run >= persist {
-                self.deciding = TestResult {
-                    value: f64::from(run),
-                    min: 0.0,
-                    max: f64::from(persist - 1),
-                    verdict: Verdict::Failed,
-                };
-                self.candidates = [(EVENT_NAMES[event], 1.0), ("", 0.0), ("", 0.0), ("", 0.0)];
-                self.decided = Some(IntakeDecision::Circuit { event });
-                self.episode = None;
-                return;
-            }
-        }
-        let frozen_limit = self.cfg.frozen_segments;
-        for (run, event, name) in [
-            (self.map_frozen_run, 0, IntakeFault::MapSensor.name()),
-            (self.maf_frozen_run, 3, IntakeFault::MafSensor.name()),
-        ] {
-            if run >= frozen_limit {
-                self.deciding = TestResult {
-                    value: f64::from(run),
-                    min: 0.0,
-                    max: f64::from(frozen_limit - 1),
-                    verdict: Verdict::Failed,
-                };
-                self.candidates = [(name, 1.0), ("", 0.0), ("", 0.0), ("", 0.0)];
-                self.decided = Some(IntakeDecision::Frozen { event });
-                self.episode = None;
-                return;
-            }
-        }
-        if self.episode.is_none() {
-            if let Some(onset) = residual_alarm {
-                // Refit the hypotheses from the candidate onsets back from the estimate.
-                let earliest = onset
-                    .saturating_sub(ONSET_MARGIN)
-                    .max(k.saturating_sub(ONSET_WINDOW_MAX))
-                    .max(1);
-                self.scan = OnsetScan::new(earliest, k);
-                let first = self.scan.earliest_onset();
-                let back = (k + 1).saturating_sub(first) as usize;
-                let held = back.min(self.history.len()) as u64;
-                let (mut cmd_sum, mut n) = (0.0, 0u64);
-                for (i, r) in self.history.last(back).enumerate() {
-                    self.scan.push(k + 1 - held + i as u64, r);
-                    cmd_sum += r.egr_cmd;
-                    n += 1;
-                }
-                self.episode = Some(Episode {
-                    alarm_s: now_s,
-                    cmd_sum,
-                    segments: n,
-                });
-                return;
-            }
-            return;
-        }
-        let Some(mut ep) = self.episode else {
-            return;
-        };
-        ep.cmd_sum += seg.egr_cmd;
-        ep.segments += 1;
-        self.episode = Some(ep);
-        let ranked = self.scan.ranked();
-        let elapsed = now_s - ep.alarm_s;
-        let best = ranked[0];
-        let significant = best.glr >= self.cfg.isolation_min_glr;
-        let clear = best.glr - ranked[1].glr >= self.cfg.isolation_margin;
-        self.isolation = TestResult {
-            value: best.glr - ranked[1].glr,
-            min: 0.0,
-            max: self.cfg.isolation_margin,
-            verdict: Verdict::PreFailed,
-        };
-        // A repeated reading is a stuck sensor in the making: the frozen check names it.
-        let repeating = self.map_frozen_run > 0 || self.maf_frozen_run > 0;
-        if elapsed >= self.cfg.isolation_min_s && significant && clear && !repeating {
-            self.isolation.verdict = Verdict::Failed;
-            let total: f64 = ranked
-                .iter()
-                .map(|f| f.glr.max(0.0))
-                .sum::<f64>()
-                .max(1e-12);
-            for (c, f) in self.candidates.iter_mut().zip(ranked.iter()) {
-                *c = (f.fault.name(), f.glr.max(0.0) / total);
-            }
-            let event = match best.fault {
-                IntakeFault::MapSensor => 0,
-                IntakeFault::MafSensor => 3,
-                IntakeFault::EgrValve => {
-                    let mean_cmd = ep.cmd_sum / ep.segments.max(1) as f64;
-                    if best.parameter < mean_cmd {
-                        6
-                    } else {
-                        7
-                    }
-                }
-                IntakeFault::Leak => 8,
-            };
-            self.deciding = TestResult {
-                value: best.glr,
-                min: 0.0,
-                max: self.cfg.isolation_min_glr,
-                verdict: Verdict::Failed,
-            };
-            self.decided = Some(IntakeDecision::Residual { fit: best, event });
-            self.episode = None;
-            tracing::debug!(
-                time_s = now_s,
-                fault = best.fault.name(),
-                parameter = best.parameter,
-                glr = best.glr,
-                "intake fault isolated"
-            );
-        } else if elapsed >= self.cfg.isolation_max_s && !significant {
-            // Unexplained alarm: no hypothesis is significant. Close the episode.
-            self.episode = None;
-            self.isolation.verdict = Verdict::Passed;
-        }
-        // Significant but ambiguous (two faults explain the data equally well, e.g. a leak and
-        // an EGR valve stuck open while the EGR command does not move): no DTC is named; the
-        // episode goes on until the driving separates them.
     }
 
     /// Steps the filters through a segment with a refused reading: the centralized EKF and the
     /// decentralized pair update with the sensor that is left, the federated filter (which
     /// needs both) waits.
-    fn run_filters_partial(&mut self, u: &IntakeInput, seg: &Segment, map_ok: bool, maf_ok: bool) {
+    fn run_filters_partial(
+        &mut self,
+        u: &IntakeInput,
+        map_pa: f64,
+        maf_kg_s: f64,
+        map_ok: bool,
+        maf_ok: bool,
+    ) {
         let Some(f) = self.filters.as_mut() else {
             return;
         };
         let y = Vector2::new(
-            if map_ok { seg.map_pa } else { 0.0 },
-            if maf_ok { seg.maf_kg_s } else { 0.0 },
+            if map_ok { map_pa } else { 0.0 },
+            if maf_ok { maf_kg_s } else { 0.0 },
         );
         let central = f.central.predict(u).and_then(|()| {
             if map_ok || maf_ok {
@@ -1186,7 +2084,7 @@ impl IntakeMonitor {
                 Ok(())
             }
         });
-        let (y_map, y_maf) = (Vector1::new(seg.map_pa), Vector1::new(seg.maf_kg_s));
+        let (y_map, y_maf) = (Vector1::new(map_pa), Vector1::new(maf_kg_s));
         let pair = f
             .pair
             .step_partial(u, map_ok.then_some(&y_map), maf_ok.then_some(&y_maf));
@@ -1196,20 +2094,25 @@ impl IntakeMonitor {
     }
 
     /// Which filter's estimate is the output. The configured primary while both sensors are
-    /// trusted; after a MAP fault (named, or a refused MAP reading) the MAF-only local filter,
-    /// after a MAF, EGR or leak fault the MAP-only local filter: it measures the pressure
-    /// itself and its random-walk throttle flow absorbs any unmetered air, so its pressure and
-    /// intake-valve flow stay right.
+    /// trusted; with the MAP untrusted (a decided MAP fault, or a refused reading) the
+    /// MAF-only local filter, with the MAF untrusted or an EGR or leak fault decided the
+    /// MAP-only local filter: it measures the pressure itself and its random-walk throttle
+    /// flow absorbs any unmetered air, so its pressure and intake-valve flow stay right.
     fn output_filter(&self, map_ok: bool, maf_ok: bool) -> OutputFilter {
-        let map_fault = match self.decided {
-            Some(IntakeDecision::Residual { fit, .. }) => Some(fit.fault == IntakeFault::MapSensor),
-            Some(d) => Some(d.event() <= 2),
-            None => None,
-        };
-        match (map_fault, map_ok, maf_ok) {
-            (Some(true), ..) | (None, false, true) => OutputFilter::MafLocal,
-            (Some(false), ..) | (None, true, false) => OutputFilter::MapLocal,
-            (None, ..) => OutputFilter::Primary,
+        let map_bad = !map_ok
+            || self.sensors[MAP].any()
+            || self.residual[IntakeFault::MapSensor.index()].is_some();
+        let maf_bad = !maf_ok
+            || self.sensors[MAF].any()
+            || self.residual[IntakeFault::MafSensor.index()].is_some();
+        let air = self.residual[IntakeFault::EgrValve.index()].is_some()
+            || self.residual[IntakeFault::Leak.index()].is_some();
+        match (map_bad, maf_bad || air) {
+            (true, false) => OutputFilter::MafLocal,
+            (false, true) => OutputFilter::MapLocal,
+            (true, true) if !map_ok => OutputFilter::MafLocal,
+            (true, true) => OutputFilter::MapLocal,
+            (false, false) => OutputFilter::Primary,
         }
     }
 
@@ -1252,16 +2155,10 @@ impl IntakeMonitor {
     fn reset_cycle_state(&mut self) {
         self.filters = None;
         self.last_t_ns = None;
-        self.decided = None;
-        self.deciding = TestResult::NOT_TESTED;
         self.episode = None;
         self.scan = OnsetScan::default();
         self.history.clear();
-        self.cusum_p.reset();
-        self.cusum_x.reset();
-        self.cusum_t.reset();
-        self.nis_central.clear();
-        self.nis_federated.clear();
+        self.rearm();
         self.map_low_run = 0;
         self.map_high_run = 0;
         self.maf_low_run = 0;
@@ -1269,8 +2166,24 @@ impl IntakeMonitor {
         self.map_frozen_run = 0;
         self.maf_frozen_run = 0;
         (self.last_map, self.last_maf) = (f64::NAN, f64::NAN);
+        (self.prev_map, self.prev_maf) = (f64::NAN, f64::NAN);
+        (self.map_rate, self.maf_rate) = (0.0, 0.0);
+        self.last_throttle = f64::NAN;
+        self.throttle_steady_run = 0;
         self.choked_run = 0;
         self.segment = 0;
+        self.sensors = [SensorState::default(); 2];
+        self.maf_ratio = LearnedRatio::default();
+        self.throttle_ratio = LearnedRatio::default();
+        self.noise = [NoiseTest::default(); 2];
+        self.settle_s = 0.0;
+        self.est_prev = [f64::NAN; 2];
+        self.learn = None;
+        self.residual = [None; 4];
+        self.group = false;
+        self.ev_result = [TestResult::NOT_TESTED; EVENTS];
+        self.ev_cands = [[("", 0.0); 4]; EVENTS];
+        self.ev_ncand = [0; EVENTS];
     }
 }
 

@@ -1,0 +1,424 @@
+//! The intake monitor's decisions over time, on simulated drives of the truth simulator's own
+//! plant ([`IntakeSim::from_scenario`]): the group DTC then the specific one for a fault that is
+//! ambiguous at first, faults that heal (a circuit fault and a residual fault: their DTCs pass
+//! again, ISO 14229 testFailed 1 -> 0, while the memory keeps the pending/confirmed history),
+//! two faults at once (isolable: two DTCs; not isolable: the group DTC naming both), and a
+//! healthy MAP above the circuit-high limit at wide-open throttle (judged against the model).
+//!
+//! `cargo test --release --test intake_decisions -- --nocapture` prints the event sequences.
+
+use fdd_diagnostics::dtc::StatusBit;
+use fdd_fixtures::intake_faults::IntakeFaultSpec;
+use fdd_fixtures::intake_profile::{IdleSpec, ProfileSpec, TipInOutSpec};
+use fdd_fixtures::intake_sim::{default_intake_model, IntakeFault, IntakeScenario, IntakeSim};
+use fdd_monitor::intake::{IntakeMonitor, IntakeMonitorConfig, Segment, GROUP_EVENT};
+use fdd_monitor::monitor::{Monitor, Output};
+use fdd_monitor::signal_table::{SignalSpec, SignalTable};
+
+fn table() -> SignalTable {
+    SignalTable::new(
+        [
+            "engine_speed",
+            "intake_throttle",
+            "egr_command",
+            "map",
+            "maf",
+        ]
+        .iter()
+        .map(|n| SignalSpec {
+            name: n.to_string(),
+            max_age_ns: 250_000_000,
+        })
+        .collect(),
+    )
+    .expect("table")
+}
+
+/// One testFailed change of an event.
+#[derive(Debug, Clone, PartialEq)]
+struct Change {
+    t_s: f64,
+    event: String,
+    /// testFailed after the change.
+    failed: bool,
+    /// The isolation candidates of a raised event.
+    candidates: Vec<String>,
+    /// The status byte after the change.
+    status: u8,
+}
+
+fn monitor() -> IntakeMonitor {
+    let mut mon = IntakeMonitor::new(
+        &default_intake_model(),
+        &IntakeMonitorConfig::default(),
+        &table(),
+    )
+    .expect("monitor");
+    mon.start_operation_cycle(0, &mut |_| {});
+    mon
+}
+
+/// Feeds segments to `mon` and returns every testFailed change.
+fn feed(mon: &mut IntakeMonitor, segments: impl Iterator<Item = (u64, Segment)>) -> Vec<Change> {
+    let mut changes = Vec::new();
+    for (t_ns, seg) in segments {
+        mon.process_segment(t_ns, &seg, &mut |out| {
+            if let Output::Event(ev) = out {
+                if ev.bit_changed(StatusBit::TestFailed) {
+                    changes.push(Change {
+                        t_s: t_ns as f64 * 1e-9,
+                        event: ev.event.to_string(),
+                        failed: ev.status_after.test_failed(),
+                        candidates: ev
+                            .candidates
+                            .iter()
+                            .filter(|c| c.1 > 0.0)
+                            .map(|c| c.0.to_string())
+                            .collect(),
+                        status: ev.status_after.byte(),
+                    });
+                }
+            }
+        });
+    }
+    for c in &changes {
+        println!(
+            "  {:8.3} {:24} {} 0x{:02x} {:?}",
+            c.t_s,
+            c.event,
+            if c.failed { "FAILED" } else { "passed" },
+            c.status,
+            c.candidates
+        );
+    }
+    changes
+}
+
+fn simulate(sc: &IntakeScenario) -> impl Iterator<Item = (u64, Segment)> {
+    IntakeSim::from_scenario(sc).expect("scenario").map(|f| {
+        (
+            f.t_ns,
+            Segment {
+                speed_rpm: f.n_rpm,
+                throttle_deg: f.throttle_deg,
+                egr_cmd: f.egr_cmd,
+                map_pa: f.map_pa,
+                maf_kg_s: f.maf_kg_s,
+            },
+        )
+    })
+}
+
+fn raised(changes: &[Change]) -> Vec<&str> {
+    changes
+        .iter()
+        .filter(|c| c.failed)
+        .map(|c| c.event.as_str())
+        .collect()
+}
+
+/// A 3 mm leak from 10 s on the tip-in/tip-out drive: it starts in a tip-out, where a leak, an
+/// EGR valve stuck open and a MAP offset raise the manifold pressure alike. The group DTC comes
+/// first, with the leak and the EGR valve among its candidates; the tip-ins that follow tell the
+/// leak apart, the specific leak DTC is raised and the group event passes in the same segment.
+#[test]
+fn an_ambiguous_leak_gets_the_group_dtc_then_the_specific_one() {
+    let sc = IntakeScenario::new(
+        "ambiguous_leak",
+        40.0,
+        106,
+        ProfileSpec::TipInOut(TipInOutSpec::default()),
+        IntakeFault::Leak {
+            start_s: 10.0,
+            diameter_m: 0.003,
+        },
+    );
+    let mut mon = monitor();
+    let changes = feed(&mut mon, simulate(&sc));
+    assert_eq!(
+        raised(&changes),
+        vec![GROUP_EVENT, "intake_leak"],
+        "{changes:?}"
+    );
+    let group = &changes[0];
+    assert!(group.t_s > 10.0 && group.t_s < 12.0, "{group:?}");
+    for c in ["manifold_leak", "egr_valve"] {
+        assert!(group.candidates.iter().any(|g| g == c), "{group:?}");
+    }
+    let leak = changes
+        .iter()
+        .find(|c| c.event == "intake_leak")
+        .expect("leak DTC");
+    assert_eq!(
+        leak.candidates.first().map(String::as_str),
+        Some("manifold_leak")
+    );
+    let passed = changes
+        .iter()
+        .find(|c| c.event == GROUP_EVENT && !c.failed)
+        .expect("the group event passes");
+    assert_eq!(passed.t_s, leak.t_s, "it passes when the fault is named");
+    // ISO 14229: testFailed clear, pending and confirmed-this-cycle history kept.
+    assert_eq!(passed.status & 0x01, 0);
+    assert_ne!(
+        passed.status & 0x04,
+        0,
+        "pendingDTC kept: 0x{:02x}",
+        passed.status
+    );
+}
+
+/// The same ambiguity at idle, where nothing tells a leak from an EGR valve stuck open (the
+/// command is 0, both add unmetered gas): the group DTC naming both, never a specific DTC.
+#[test]
+fn a_leak_at_idle_stays_a_group_dtc() {
+    let sc = IntakeScenario::new(
+        "idle_leak",
+        60.0,
+        7,
+        ProfileSpec::Idle(IdleSpec::default()),
+        IntakeFault::Leak {
+            start_s: 20.0,
+            diameter_m: 0.003,
+        },
+    );
+    let mut mon = monitor();
+    let changes = feed(&mut mon, simulate(&sc));
+    assert_eq!(raised(&changes), vec![GROUP_EVENT], "{changes:?}");
+    let g = &changes[0];
+    assert!(g.t_s > 20.0 && g.t_s < 22.0, "{g:?}");
+    for c in ["manifold_leak", "egr_valve"] {
+        assert!(g.candidates.iter().any(|x| x == c), "{g:?}");
+    }
+    assert!(mon.group_failed(), "still failed at the end");
+}
+
+/// A MAP signal line open from 10 s to 20 s: circuit low, then, reading plausibly again for
+/// `heal_s`, the DTC passes (testFailed 1 -> 0); the filters start again and nothing else is
+/// raised.
+#[test]
+fn a_circuit_fault_that_ends_passes_again() {
+    let mut sc = IntakeScenario::new(
+        "map_open_heals",
+        40.0,
+        3,
+        ProfileSpec::TipInOut(TipInOutSpec::default()),
+        IntakeFault::None,
+    );
+    sc.fault = IntakeFaultSpec::ending(IntakeFault::MapOpen { start_s: 10.0 }, 20.0);
+    let mut mon = monitor();
+    let changes = feed(&mut mon, simulate(&sc));
+    assert_eq!(raised(&changes), vec!["map_circuit_low"], "{changes:?}");
+    let heal = changes
+        .iter()
+        .find(|c| c.event == "map_circuit_low" && !c.failed)
+        .expect("healed");
+    let heal_s = IntakeMonitorConfig::default().heal_s;
+    assert!(
+        heal.t_s >= 20.0 + heal_s && heal.t_s < 20.0 + heal_s + 1.0,
+        "{heal:?}"
+    );
+    assert_eq!(heal.status & 0x01, 0);
+    assert!(mon.decision().is_none());
+}
+
+/// A MAP offset of 5 kPa from 10 s to 25 s: the MAP range/performance DTC (after the group DTC
+/// where isolation takes longer than `group_after_s`); once the offset is gone the sequential
+/// test "gone" against "still there" passes it again, and nothing else is raised.
+#[test]
+fn a_residual_fault_that_ends_passes_again() {
+    let mut sc = IntakeScenario::new(
+        "map_bias_heals",
+        45.0,
+        102,
+        ProfileSpec::TipInOut(TipInOutSpec::default()),
+        IntakeFault::None,
+    );
+    sc.fault = IntakeFaultSpec::ending(
+        IntakeFault::MapBias {
+            start_s: 10.0,
+            bias_pa: 5000.0,
+        },
+        25.0,
+    );
+    let mut mon = monitor();
+    let changes = feed(&mut mon, simulate(&sc));
+    let specific: Vec<&str> = raised(&changes)
+        .into_iter()
+        .filter(|e| *e != GROUP_EVENT)
+        .collect();
+    assert_eq!(specific, vec!["map_range_performance"], "{changes:?}");
+    let heal = changes
+        .iter()
+        .find(|c| c.event == "map_range_performance" && !c.failed)
+        .expect("healed");
+    assert!(heal.t_s > 25.0 && heal.t_s < 30.0, "{heal:?}");
+    assert!(mon.decision().is_none(), "{:?}", mon.decision());
+}
+
+/// Two faults at once that the monitor tells apart: a MAP signal line open from 10 s and a MAF
+/// stuck from 12 s. Each sensor's own checks run whatever the other does: two DTCs.
+#[test]
+fn two_sensor_faults_at_once_get_two_dtcs() {
+    let mut sc = IntakeScenario::new(
+        "two_sensor_faults",
+        30.0,
+        5,
+        ProfileSpec::TipInOut(TipInOutSpec::default()),
+        IntakeFault::MapOpen { start_s: 10.0 },
+    );
+    sc.second_fault = Some(IntakeFault::MafStuck { start_s: 12.0 }.into());
+    let mut mon = monitor();
+    let changes = feed(&mut mon, simulate(&sc));
+    assert_eq!(
+        raised(&changes),
+        vec!["map_circuit_low", "maf_range_performance"],
+        "{changes:?}"
+    );
+    assert_eq!(mon.decisions().flatten().count(), 2);
+}
+
+/// Two residual faults one after the other: a MAF gain error from 10 s and a 3 mm leak from
+/// 25 s. The first is named and taken out of the filters' inputs (its reading corrected), so
+/// the residuals go on testing and the leak gets its own DTC, with the MAF's still failed.
+#[test]
+fn a_second_residual_fault_gets_its_own_dtc() {
+    let mut sc = IntakeScenario::new(
+        "maf_then_leak",
+        45.0,
+        103,
+        ProfileSpec::TipInOut(TipInOutSpec::default()),
+        IntakeFault::MafGain {
+            start_s: 10.0,
+            gain: 1.1,
+        },
+    );
+    sc.second_fault = Some(
+        IntakeFault::Leak {
+            start_s: 25.0,
+            diameter_m: 0.003,
+        }
+        .into(),
+    );
+    let mut mon = monitor();
+    let changes = feed(&mut mon, simulate(&sc));
+    let specific: Vec<&str> = raised(&changes)
+        .into_iter()
+        .filter(|e| *e != GROUP_EVENT)
+        .collect();
+    assert_eq!(
+        specific,
+        vec!["maf_range_performance", "intake_leak"],
+        "{changes:?}"
+    );
+    let leak = changes
+        .iter()
+        .find(|c| c.event == "intake_leak")
+        .expect("leak");
+    assert!(leak.t_s > 25.0, "{leak:?}");
+    // Both still failed at the end.
+    assert!(!changes
+        .iter()
+        .any(|c| !c.failed && (c.event == "maf_range_performance" || c.event == "intake_leak")));
+}
+
+/// Two faults at once that the data cannot tell apart: at idle a leak and an EGR valve stuck
+/// open add unmetered gas alike. The group DTC, naming both.
+#[test]
+fn two_ambiguous_faults_at_once_get_the_group_dtc() {
+    let mut sc = IntakeScenario::new(
+        "leak_and_egr",
+        60.0,
+        11,
+        ProfileSpec::Idle(IdleSpec::default()),
+        IntakeFault::Leak {
+            start_s: 20.0,
+            diameter_m: 0.0025,
+        },
+    );
+    sc.second_fault = Some(
+        IntakeFault::EgrStuckOpen {
+            start_s: 20.0,
+            position: 0.2,
+        }
+        .into(),
+    );
+    let mut mon = monitor();
+    let changes = feed(&mut mon, simulate(&sc));
+    assert_eq!(raised(&changes), vec![GROUP_EVENT], "{changes:?}");
+    for c in ["manifold_leak", "egr_valve"] {
+        assert!(changes[0].candidates.iter().any(|x| x == c), "{changes:?}");
+    }
+}
+
+/// Circuit high is judged against the model. Wide-open throttle at 3000 rpm where the MAP reads
+/// 112 kPa, above 1.1 x the model's ambient (111.5 kPa), and the MAF the flow of a 109 kPa
+/// manifold (an ambient higher than the model's, a sensor reading 3 % high): the filters put the
+/// sensor's pressure above the limit less its margin, so the reading is not ruled out and no
+/// DTC is raised. Then at part load the MAP reads 115 kPa (shorted to the supply) where the MAF
+/// says 50 kPa: circuit high after `circuit_persist_segments`.
+#[test]
+fn circuit_high_only_where_the_model_rules_the_reading_out() {
+    let model = default_intake_model();
+    let cfg = IntakeMonitorConfig::default();
+    let mut mon = monitor();
+    let dt_ns = 10_000_000u64; // 3000 rpm: 10 ms per segment
+    let mut t = 0u64;
+    let mut segs = Vec::new();
+    let mut push = |map: f64, p_flow: f64, throttle: f64, n: usize| {
+        for k in 0..n {
+            t += dt_ns;
+            // Sensor noise (a reading repeated exactly is a stuck sensor).
+            let wiggle = ((k % 7) as f64 - 3.0) / 3.0;
+            let maf = model.intake_valve_flow(p_flow, 3000.0) * (1.0 + 0.004 * wiggle);
+            segs.push((
+                t,
+                Segment {
+                    speed_rpm: 3000.0,
+                    throttle_deg: throttle,
+                    egr_cmd: 0.0,
+                    map_pa: map + 300.0 * wiggle,
+                    maf_kg_s: maf,
+                },
+            ));
+        }
+    };
+    // Part load first (the filters and the learned corrections settle), then wide open.
+    push(50_000.0, 50_000.0, 12.0, 800);
+    push(112_000.0, 109_000.0, 80.0, 300);
+    let changes = feed(&mut mon, segs.clone().into_iter());
+    assert!(
+        !raised(&changes).contains(&"map_circuit_high"),
+        "healthy MAP at wide open throttle: {changes:?}"
+    );
+    let mut segs = Vec::new();
+    let mut push2 = |map: f64, p_flow: f64, n: usize| {
+        for k in 0..n {
+            t += dt_ns;
+            let wiggle = ((k % 7) as f64 - 3.0) / 3.0;
+            let maf = model.intake_valve_flow(p_flow, 3000.0) * (1.0 + 0.004 * wiggle);
+            segs.push((
+                t,
+                Segment {
+                    speed_rpm: 3000.0,
+                    throttle_deg: 12.0,
+                    egr_cmd: 0.0,
+                    map_pa: if map > 114_000.0 {
+                        map
+                    } else {
+                        map + 300.0 * wiggle
+                    },
+                    maf_kg_s: maf,
+                },
+            ));
+        }
+    };
+    push2(50_000.0, 50_000.0, 300);
+    push2(
+        115_000.0,
+        50_000.0,
+        cfg.circuit_persist_segments as usize + 2,
+    );
+    let changes = feed(&mut mon, segs.into_iter());
+    assert_eq!(raised(&changes), vec!["map_circuit_high"], "{changes:?}");
+}
