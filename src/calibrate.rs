@@ -46,10 +46,11 @@ const UNREACHABLE_NIS: f64 = 1e12;
 const MODEL_ERROR_TAU_S: f64 = 0.1;
 
 /// The throttle tests calibrated: (test output name, `[monitor]` key).
-const TESTS: [(&str, &str); 3] = [
+const TESTS: [(&str, &str); 4] = [
     ("tps_nis_window", "tps_nis_threshold"),
     ("tps_cusum", "tps_cusum_threshold"),
     ("wattmeter_cusum", "watt_cusum_threshold"),
+    ("tps_step", "tps_step_sigma"),
 ];
 
 /// Why a calibration was refused or could not run.
@@ -156,8 +157,8 @@ struct Collector {
     file: PathBuf,
     block_ns: u64,
     /// Per test: block maxima with their log and start time.
-    maxima: [Vec<(f64, usize, f64)>; 3],
-    current: [Option<(u64, f64)>; 3],
+    maxima: [Vec<(f64, usize, f64)>; TESTS.len()],
+    current: [Option<(u64, f64)>; TESTS.len()],
     log_index: usize,
     noise: (f64, f64),
     /// Low-passed wattmeter innovation (W, time constant [`MODEL_ERROR_TAU_S`]), the block's
@@ -183,7 +184,7 @@ impl Collector {
 
 impl ReplayObserver for Collector {
     fn begin_log(&mut self, _rt: &Runtime, _truths: &[TruthConfig]) {
-        self.current = [None; 3];
+        self.current = [None; TESTS.len()];
         self.watt_lp = 0.0;
         self.watt_lp_block = None;
         self.noise = (f64::NAN, f64::NAN);
@@ -250,7 +251,7 @@ impl ReplayObserver for Collector {
 
     fn end_log(&mut self) {
         // The last, partial block is dropped.
-        self.current = [None; 3];
+        self.current = [None; TESTS.len()];
         if let Some(a) = self.first_ns {
             self.total_ns += self.last_ns.saturating_sub(a);
         }
@@ -371,6 +372,7 @@ pub fn calibrate(
         ("tps_nis_threshold", UNREACHABLE_NIS),
         ("tps_cusum_threshold", UNREACHABLE_CUSUM),
         ("watt_cusum_threshold", UNREACHABLE_CUSUM),
+        ("tps_step_sigma", UNREACHABLE_NIS),
     ];
 
     // Pass 1: the noise levels, with wide bounds.

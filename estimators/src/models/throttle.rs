@@ -172,6 +172,23 @@ impl ThrottleModel {
         mode_index(&self.params, self.angle_deg(x))
     }
 
+    /// How far (deg) the next step's angle could differ if the plate were in another mode whose
+    /// band lies within `margin_deg` of its angle: `|a12_s' - a12_s| |rho|`. The identified
+    /// modes scale the velocity state differently (a12 is -0.003, 0.0021 and 0.0442 in Table I),
+    /// so a fast plate crossing a mode boundary jumps by degrees in one step, and an estimate a
+    /// fraction of a degree off the boundary predicts the jump one step early or late.
+    pub fn mode_switch_spread_deg(&self, x: &Vector3<f64>, margin_deg: f64) -> f64 {
+        let theta = self.angle_deg(x);
+        let s = mode_index(&self.params, theta);
+        let lo = mode_index(&self.params, theta - margin_deg);
+        let hi = mode_index(&self.params, theta + margin_deg);
+        let a12 = self.params.modes[s].a12;
+        (lo..=hi)
+            .map(|t| (self.params.modes[t].a12 - a12).abs() * x[1].abs())
+            .fold(0.0, f64::max)
+            / self.params.angle_scale
+    }
+
     /// Steady state of mode `s` under constant voltage `u` (ignoring the stops and with
     /// `sgn(rho) = 0`), returned as the angle in degrees. Used to check how the modes join.
     pub fn static_angle_deg(&self, s: usize, u: f64, above_switch: bool) -> f64 {

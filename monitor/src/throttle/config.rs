@@ -70,6 +70,20 @@ pub struct ThrottleMonitorConfig {
     /// `(lag * predicted TPS rate)^2` to the innovation variance, so a fast move read a
     /// millisecond late is not a jump.
     pub tps_lag_tolerance_s: f64,
+    /// Step test: the TPS change over the last `TPS_STEP_SAMPLES` samples against the change
+    /// the model predicts from the TPS filter's estimates, failed when it exceeds
+    /// `tps_step_sigma` standard deviations on two samples in a row (a one-sample spike cancels
+    /// in the next window; a step stays). The standard deviation is
+    /// `sqrt(2 R + tps_step_floor_v^2 + (tps_step_motion_scale * m)^2)`, `m` the largest
+    /// one-sample change, measured or predicted, of the last few samples (V): while the plate
+    /// is fast, a sensor lag or a mode switch of the identified model moves the TPS by a
+    /// fraction of that against the prediction; at rest a step of a tenth of a volt is a fault.
+    pub tps_step_sigma: f64,
+    pub tps_step_floor_v: f64,
+    pub tps_step_motion_scale: f64,
+    /// Mode switches within this many degrees of the estimate count as possible in the
+    /// allowance (see `ThrottleModel::mode_switch_spread_deg`).
+    pub tps_step_mode_margin_deg: f64,
     /// CUSUM on the combined filter's wattmeter innovation.
     pub watt_cusum_min_bias_sigma: f64,
     pub watt_cusum_threshold: f64,
@@ -78,6 +92,10 @@ pub struct ThrottleMonitorConfig {
     /// residual means of a few hundredths of a watt, which a quiet wattmeter's CUSUM would
     /// otherwise accumulate.
     pub watt_model_error_w: f64,
+    /// A healthy wattmeter's gain tolerance (relative): residuals within this share of the
+    /// predicted reading widen the dead band (4 % is the spread of the tuning set's healthy
+    /// wattmeters; a shunt 11 % or more off is a fault).
+    pub watt_gain_tolerance: f64,
     /// A wattmeter fault is named only after this many alarms of its test within
     /// `watt_confirm_s` of the first (the test restarts after each alarm; a fault keeps it
     /// alarming, a burst of model error does not).
@@ -144,11 +162,16 @@ impl Default for ThrottleMonitorConfig {
             tps_nis_threshold: 800.0,
             tps_cusum_min_bias_sigma: 1.0,
             tps_cusum_threshold: 40.0,
+            tps_step_sigma: 10.0,
+            tps_step_floor_v: 0.02,
+            tps_step_motion_scale: 1.0,
+            tps_step_mode_margin_deg: 1.5,
             watt_cusum_min_bias_sigma: 0.5,
             watt_cusum_threshold: 35.0,
             tps_tolerance_v: 0.0,
-            tps_lag_tolerance_s: 0.0,
+            tps_lag_tolerance_s: 0.003,
             watt_model_error_w: 0.05,
+            watt_gain_tolerance: 0.04,
             watt_confirm_alarms: 3,
             watt_confirm_s: 2.0,
             tps_noise_min_v: 0.0052,

@@ -31,6 +31,7 @@
 //! switches the output (the TPS stays the source).
 
 pub mod config;
+pub mod step_test;
 
 use fdd_diagnostics::detectors::{two_sided_arl, Cusum, CusumConfig};
 use fdd_diagnostics::{TestResult, Verdict};
@@ -40,6 +41,7 @@ use fdd_estimators::{NoiseLevel, SigmaPoints, Ukf};
 use nalgebra::{Matrix1, Matrix2, Matrix3, Vector1, Vector2, Vector3};
 
 pub use config::ThrottleMonitorConfig;
+use step_test::{StepTest, StepTestConfig};
 
 use crate::monitor::{Monitor, Output, OutputSink};
 use crate::monitor_events::{EventSpec, FreezeValues, MonitorEvents};
@@ -240,7 +242,10 @@ pub struct ThrottleMonitor {
     frozen_run: u32,
     last_tps: f64,
     first_fail_s: Option<f64>,
-    fired: [bool; 3],
+    /// Residual tests that failed in this episode: TPS NIS window, TPS CUSUM, wattmeter
+    /// CUSUM, TPS step.
+    fired: [bool; 4],
+    step_test: StepTest,
     /// Wattmeter test alarms in the current episode.
     watt_alarms: u32,
     /// The first failing residual test's result, kept through the decision window.
@@ -301,6 +306,7 @@ impl ThrottleMonitor {
             ("fallback_r_scale", cfg.fallback_r_scale),
             ("plate_persist_s", cfg.plate_persist_s),
             ("watt_confirm_s", cfg.watt_confirm_s),
+            ("tps_step_sigma", cfg.tps_step_sigma),
         ] {
             if !(v > 0.0 && v.is_finite()) {
                 return Err(setting(key, format!("{v} must be a positive number")));
@@ -311,6 +317,10 @@ impl ThrottleMonitor {
             ("tps_tolerance_v", cfg.tps_tolerance_v),
             ("tps_lag_tolerance_s", cfg.tps_lag_tolerance_s),
             ("noise_settle_s", cfg.noise_settle_s),
+            ("tps_step_floor_v", cfg.tps_step_floor_v),
+            ("watt_gain_tolerance", cfg.watt_gain_tolerance),
+            ("tps_step_motion_scale", cfg.tps_step_motion_scale),
+            ("tps_step_mode_margin_deg", cfg.tps_step_mode_margin_deg),
         ] {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(setting(key, format!("{v} must be a non-negative number")));
@@ -451,7 +461,12 @@ impl ThrottleMonitor {
             frozen_run: 0,
             last_tps: f64::NAN,
             first_fail_s: None,
-            fired: [false; 3],
+            fired: [false; 4],
+            step_test: StepTest::new(StepTestConfig {
+                sigma: cfg.tps_step_sigma,
+                floor_v: cfg.tps_step_floor_v,
+                motion_scale: cfg.tps_step_motion_scale,
+            }),
             watt_alarms: 0,
             first_result: TestResult::NOT_TESTED,
             tps_fault: None,
@@ -526,6 +541,7 @@ impl ThrottleMonitor {
         self.end_episode();
         self.nis_ring.clear();
         self.nis_sum = 0.0;
+        self.step_test.reset();
         self.dropouts.clear();
         self.rail_low_run = 0;
         self.rail_high_run = 0;
@@ -608,7 +624,7 @@ impl ThrottleMonitor {
         if tps_testable && self.plate_fault.is_none() && self.static_while_driven() {
             return Some(ThrottleFault::PlateStuck);
         }
-        let tps_fired = self.fired[0] || self.fired[1];
+        let tps_fired = self.fired[0] || self.fired[1] || self.fired[3];
         if self.fired[2] && !tps_fired && self.watt_fault.is_none() {
             return Some(ThrottleFault::Wattmeter);
         }
@@ -621,7 +637,7 @@ impl ThrottleMonitor {
     /// Closes the residual episode.
     fn end_episode(&mut self) {
         self.first_fail_s = None;
-        self.fired = [false; 3];
+        self.fired = [false; 4];
         self.watt_alarms = 0;
     }
 
@@ -666,7 +682,7 @@ impl ThrottleMonitor {
     }
 
     /// The decision of one step: new faults, then healing.
-    fn decide(&mut self, now_s: f64, tps: Option<f64>, results: &[TestResult; 3]) {
+    fn decide(&mut self, now_s: f64, tps: Option<f64>, results: &[TestResult; 4]) {
         let rail = |run: u32, persist: u32, period_s: f64| TestResult {
             value: f64::from(run) * period_s,
             min: 0.0,
@@ -732,6 +748,7 @@ impl ThrottleMonitor {
             tps_testable,
             tps_testable,
             tps_testable && self.watt_fault.is_none(),
+            tps_testable,
         ];
         for (i, r) in results.iter().enumerate() {
             if eligible[i] && r.verdict == Verdict::Failed {
@@ -789,6 +806,7 @@ impl ThrottleMonitor {
                     self.frozen_run < self.cfg.frozen_samples
                         && quiet(&results[0])
                         && quiet(&results[1])
+                        && !matches!(results[3].verdict, Verdict::Failed)
                 }
             };
             self.heal_run[0] = if ok { self.heal_run[0] + 1 } else { 0 };
@@ -865,7 +883,10 @@ impl Monitor for ThrottleMonitor {
                 && theta_p - 3.0 * sigma_p > limits[0] + self.cfg.rail_margin_deg;
             rail_high = v >= self.cfg.rail_high_v
                 && theta_p + 3.0 * sigma_p < limits[1] - self.cfg.rail_margin_deg;
-            self.frozen_run = if v == self.last_tps {
+            // A reading clipped at an ADC end repeats while the plate rests on that stop
+            // (a TPS a percent high reads 5 V at the open stop): not a frozen signal.
+            let inside = v > self.cfg.rail_low_v && v < self.cfg.rail_high_v;
+            self.frozen_run = if inside && v == self.last_tps {
                 self.frozen_run + 1
             } else {
                 0
@@ -902,6 +923,7 @@ impl Monitor for ThrottleMonitor {
         // The TPS innovation's standard deviation (V), for the tolerance dead band.
         let mut sigma_t = f64::NAN;
         let mut tps_fed = false;
+        let mut step_outcome = None;
         if let (true, Some(v)) = (tps_usable, tps) {
             // Readings at the ADC's ends are clipped, not noisy: they say nothing of the noise.
             if adapt && v > self.cfg.rail_low_v && v < self.cfg.rail_high_v {
@@ -913,19 +935,34 @@ impl Monitor for ThrottleMonitor {
             // allow for on top of the innovation variance.
             // The model's motion over the step: this prediction from the previous update (an
             // update's own jump, e.g. at a bias's onset, is not motion).
-            let theta = self.model.angle_deg(self.tps_ukf.state());
+            let prior = *self.tps_ukf.state();
+            let theta = self.model.angle_deg(&prior);
             let rate_v = (theta - self.last_theta_pred) * self.volts_per_deg / self.cfg.period_s;
             let lag = if rate_v.is_finite() {
                 (self.cfg.tps_lag_tolerance_s * rate_v).powi(2)
             } else {
                 0.0
             };
+            // A mode switch one step early or late moves the prediction by this (V): model
+            // structure, not sensor error, allowed for by every TPS test.
+            let spread = self
+                .model
+                .mode_switch_spread_deg(&prior, self.cfg.tps_step_mode_margin_deg)
+                * self.volts_per_deg;
             if let Ok(inn) = self.tps_ukf.update(&Vector1::new(v), &uu) {
-                let s_eff = inn.covariance[(0, 0)] + lag;
+                let s_eff = inn.covariance[(0, 0)] + lag + spread * spread;
                 let r = inn.residual[0];
                 nis_t = r * r / s_eff;
                 sigma_t = s_eff.sqrt();
                 z_t = r / sigma_t;
+                let predicted_change = (theta - self.last_theta_pred) * self.volts_per_deg;
+                step_outcome = if predicted_change.is_finite() {
+                    self.step_test
+                        .push(v, predicted_change, spread, self.tps_noise.variance())
+                } else {
+                    self.step_test.reset();
+                    None
+                };
                 self.last_theta_pred = self.model.angle_deg(self.tps_ukf.state());
                 out(Output::Innovation {
                     filter: "tps",
@@ -936,6 +973,9 @@ impl Monitor for ThrottleMonitor {
                 });
             }
         }
+        if !tps_usable {
+            self.step_test.reset();
+        }
         let tps_trusted = self.tps_fault.is_none();
         let use_tps =
             tps_trusted && tps_usable && nis_t.is_finite() && nis_t < self.cfg.tps_gate_nis;
@@ -943,13 +983,16 @@ impl Monitor for ThrottleMonitor {
         let mut z_w = f64::NAN;
         // The wattmeter innovation's standard deviation (W), for the model-error dead band.
         let mut sigma_w = f64::NAN;
+        // The wattmeter reading the filters predict (W), for the gain tolerance.
+        let mut predicted_w = 0.0;
         if let (false, Some(w)) = (use_watt, watt) {
             // A failed wattmeter is still compared with the combined filter's prediction of
             // `i^2` (Gaussian moments: mean mu^2 + P, variance 4 mu^2 P + 2 P^2, plus R).
             let (mu, p) = (self.both_ukf.state()[2], self.both_ukf.covariance()[(2, 2)]);
             let var = 4.0 * mu * mu * p + 2.0 * p * p + self.both_ukf.measurement_noise()[(1, 1)];
             sigma_w = var.max(f64::MIN_POSITIVE).sqrt();
-            z_w = (w - (mu * mu + p)) / sigma_w;
+            predicted_w = mu * mu + p;
+            z_w = (w - predicted_w) / sigma_w;
         }
         if !tps_fed {
             self.tps_noise.gap();
@@ -965,6 +1008,7 @@ impl Monitor for ThrottleMonitor {
                 if use_watt {
                     z_w = inn.normalized(1);
                     sigma_w = inn.covariance[(1, 1)].sqrt();
+                    predicted_w = watt.unwrap_or(0.0) - inn.residual[1];
                 }
                 if !use_tps && self.reacquire.observe(inn.nis, inn.dof) {
                     let _reset_ok = self.both_ukf.reset(eq, self.p0).is_ok();
@@ -1019,7 +1063,8 @@ impl Monitor for ThrottleMonitor {
         let cusum_tps = self.cusum_tps.step(z_t.clamp(-clip, clip), z_t.is_finite());
         // Residuals within the model-error allowance are no evidence of a wattmeter fault (a dead
         // band in innovation units: wide when the wattmeter is quiet, narrow when it is noisy).
-        let band = self.cfg.watt_model_error_w / sigma_w;
+        let band = (self.cfg.watt_model_error_w + self.cfg.watt_gain_tolerance * predicted_w.abs())
+            / sigma_w;
         let z_w = if z_w.is_finite() && band >= 0.0 {
             z_w - z_w.clamp(-band, band)
         } else {
@@ -1041,7 +1086,24 @@ impl Monitor for ThrottleMonitor {
             result: cusum_watt,
         });
 
-        let results = [nis_result, cusum_tps, cusum_watt];
+        let step_result = match step_outcome {
+            Some(o) => TestResult {
+                value: o.z.abs(),
+                min: 0.0,
+                max: self.cfg.tps_step_sigma,
+                verdict: if o.failed {
+                    Verdict::Failed
+                } else {
+                    Verdict::Passed
+                },
+            },
+            None => TestResult::NOT_TESTED,
+        };
+        out(Output::Test {
+            test: "tps_step",
+            result: step_result,
+        });
+        let results = [nis_result, cusum_tps, cusum_watt, step_result];
         self.decide(now_s, tps, &results);
 
         // Events: a failed component's event fails with the result that qualified it; the
