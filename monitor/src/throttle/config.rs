@@ -122,6 +122,10 @@ pub struct ThrottleMonitorConfig {
     /// position output back to the TPS). Longer than the slowest test's detection delay, so
     /// that a fault still present fails its test again before it could heal.
     pub heal_s: f64,
+    /// A TPS range/performance fault heals only while the TPS is within this (deg, plus two
+    /// standard deviations of the estimate) of the wattmeter estimate: the TPS filter's own
+    /// tests pass again on a drift or a bias it has absorbed.
+    pub heal_agreement_deg: f64,
     /// DTCs (J2012 code and failure type byte).
     pub dtc_tps_low: String,
     pub dtc_tps_high: String,
@@ -182,6 +186,7 @@ impl Default for ThrottleMonitorConfig {
             driven_range_deg: 15.0,
             plate_persist_s: 0.3,
             heal_s: 5.0,
+            heal_agreement_deg: 4.0,
             dtc_tps_low: "P0122-16".into(),
             dtc_tps_high: "P0123-17".into(),
             dtc_tps_performance: "P0121-64".into(),

@@ -307,6 +307,7 @@ impl ThrottleMonitor {
             ("plate_persist_s", cfg.plate_persist_s),
             ("watt_confirm_s", cfg.watt_confirm_s),
             ("tps_step_sigma", cfg.tps_step_sigma),
+            ("heal_agreement_deg", cfg.heal_agreement_deg),
         ] {
             if !(v > 0.0 && v.is_finite()) {
                 return Err(setting(key, format!("{v} must be a positive number")));
@@ -802,8 +803,19 @@ impl ThrottleMonitor {
                             .last()
                             .is_none_or(|t| now_s - t > self.cfg.intermittent_window_s)
                 }
+                // A range/performance fault heals when the TPS tests pass and the TPS agrees
+                // with the wattmeter estimate again: the TPS filter absorbs a drift or a bias
+                // that stays, so its tests alone would heal a fault still present.
                 _ => {
+                    let x = self.both_ukf.state();
+                    let sigma = self.both_ukf.covariance()[(0, 0)].max(0.0).sqrt()
+                        / self.model.params().angle_scale;
+                    let agrees = tps.is_some_and(|v| {
+                        (v / self.volts_per_deg - self.model.angle_deg(x)).abs()
+                            <= self.cfg.heal_agreement_deg + 2.0 * sigma
+                    });
                     self.frozen_run < self.cfg.frozen_samples
+                        && agrees
                         && quiet(&results[0])
                         && quiet(&results[1])
                         && !matches!(results[3].verdict, Verdict::Failed)
