@@ -7,7 +7,7 @@ everything a new vehicle would change (fixtures/sets/README.md says how):
 - tuning: seeds 1000+, excitation pulse_train / chirp / pedal_ramps, wattmeter noise 0.05 to
   0.4 W, TPS noise 4-10 mV, TPS gain/offset within 1.5 % / 15 mV, wattmeter gain within 4 %,
   lags, Table I error up to 1 %, restitution 0.2, fault sizes as the committed fixtures';
-- held-out: seeds 7000+ (version 2), excitation steady_holds / idle_blips / mixed, wattmeter noise 0.05 to
+- held-out: seeds 9000+ (version 3), excitation steady_holds / idle_blips / mixed, wattmeter noise 0.05 to
   0.5 W, Table I error up to 1.5 %, stops and restitution, TPS and wattmeter gain and offset
   errors and lags, fault sizes 0.75 to 1.5 times the fixtures', long fault-free driving
   (>= 10 h in all).
@@ -168,13 +168,41 @@ def tuning():
         items.append((name, scenario(name, 1000 + n, 160, exc, sensors, plant, f, g,
                                      comment="tuning: %s from 60 s, then %s from 100 s" % (first, second))))
         n += 1
+    # Long fault-free drives over the whole documented range of plants and sensors (added
+    # after the held-out set version 2 showed rare false alarms that 1.8 h of tuning driving
+    # did not have; their own generator, so the files above stay as they were).
+    wide = random.Random(11)
+    for i in range(8):
+        exc = {"kind": styles[i % len(styles)]}
+        sensors = {
+            "wattmeter_noise_std_w": wide.choice([0.05, 0.1, 0.2, 0.3, 0.4, 0.5]),
+            "tps_noise_std_v": wide.choice([0.003, 0.005, 0.008, 0.01]),
+            "tps_gain": 1.0 + wide.uniform(-0.02, 0.02),
+            "tps_offset_v": wide.uniform(-0.02, 0.02),
+            "wattmeter_gain": 1.0 + wide.uniform(-0.04, 0.04),
+        }
+        if wide.random() < 0.5:
+            sensors["tps_lag_s"] = wide.choice([0.001, 0.002])
+        if wide.random() < 0.5:
+            sensors["wattmeter_lag_s"] = wide.choice([0.001, 0.003])
+        plant = {
+            "table1_rel_error": wide.choice([0.005, 0.01, 0.015]),
+            "table1_max_draws": 500,
+            "stop_restitution": wide.choice([0.0, 0.1, 0.3]),
+            "process_noise_scale": wide.choice([0.5, 1.0, 2.0]),
+        }
+        name = "throttle_tuning_%02d_nominal_long" % n
+        items.append((name, scenario(name, 1000 + n, 1800, exc, sensors, plant, {"kind": "none"},
+                                     comment="tuning: fault-free drive, 30 min, wide plant range")))
+        n += 1
     return items
 
 
 def heldout():
-    # Version 2 (seeds 7000+): version 1 (seeds 5000+) was evaluated once, with a tuning set
-    # that lacked sensor tolerances, lags and stop restitution, and is retired (README).
-    rng = random.Random(6)
+    # Version 3 (seeds 9000+). Version 1 (seeds 5000+) was evaluated once, with a tuning set
+    # that lacked sensor tolerances, lags and stop restitution; version 2 (seeds 7000+,
+    # random.Random(6)) once after the step test and the allowances. Both are retired (README).
+    rng = random.Random(8)
     styles = ["steady_holds", "idle_blips", "mixed"]
     items = []
     n = 0
@@ -204,7 +232,7 @@ def heldout():
     for i in range(12):
         exc, sensors, plant = common(i)
         name = "throttle_heldout_%02d_nominal" % n
-        items.append((name, scenario(name, 7000 + n, 1800, exc, sensors, plant, {"kind": "none"},
+        items.append((name, scenario(name, 9000 + n, 1800, exc, sensors, plant, {"kind": "none"},
                                      comment="held-out: fault-free drive")))
         n += 1
     # Every fault type, 4 logs each (36), sizes 0.75-1.5x, onset after 7-9 min (>= 4.2 h).
@@ -215,7 +243,7 @@ def heldout():
             scale = rng.uniform(0.75, 1.5)
             f = fault_table(rng, kind, start, scale)
             name = "throttle_heldout_%02d_%s" % (n, kind)
-            items.append((name, scenario(name, 7000 + n, start + 60, exc, sensors, plant, f,
+            items.append((name, scenario(name, 9000 + n, start + 60, exc, sensors, plant, f,
                                          comment="held-out: %s from %g s, size x%.2f" % (kind, start, scale))))
             n += 1
     # Healing and two at once.
@@ -224,7 +252,7 @@ def heldout():
         scale = rng.uniform(0.75, 1.5)
         f = fault_table(rng, kind, 300.0, scale, end_s=340.0)
         name = "throttle_heldout_%02d_%s_heals" % (n, kind)
-        items.append((name, scenario(name, 7000 + n, 400, exc, sensors, plant, f,
+        items.append((name, scenario(name, 9000 + n, 400, exc, sensors, plant, f,
                                      comment="held-out: %s from 300 s to 340 s" % kind)))
         n += 1
     for first, second in [("wattmeter", "tps_stuck"), ("wattmeter", "tps_drift")]:
@@ -232,7 +260,7 @@ def heldout():
         f = fault_table(rng, first, 300.0, rng.uniform(0.75, 1.5))
         g = fault_table(rng, second, 340.0, rng.uniform(0.75, 1.5))
         name = "throttle_heldout_%02d_%s_then_%s" % (n, first, second)
-        items.append((name, scenario(name, 7000 + n, 400, exc, sensors, plant, f, g,
+        items.append((name, scenario(name, 9000 + n, 400, exc, sensors, plant, f, g,
                                      comment="held-out: %s from 300 s, then %s from 340 s" % (first, second))))
         n += 1
     return items

@@ -172,19 +172,21 @@ impl ThrottleModel {
         mode_index(&self.params, self.angle_deg(x))
     }
 
-    /// How far (deg) the next step's angle could differ if the plate were in another mode whose
-    /// band lies within `margin_deg` of its angle: `|a12_s' - a12_s| |rho|`. The identified
-    /// modes scale the velocity state differently (a12 is -0.003, 0.0021 and 0.0442 in Table I),
-    /// so a fast plate crossing a mode boundary jumps by degrees in one step, and an estimate a
-    /// fraction of a degree off the boundary predicts the jump one step early or late.
-    pub fn mode_switch_spread_deg(&self, x: &Vector3<f64>, margin_deg: f64) -> f64 {
-        let theta = self.angle_deg(x);
+    /// How far (deg) the next step's angle could differ if the plate at `theta_deg`, with a
+    /// velocity state of magnitude up to `rho_abs`, were in another mode whose band lies within
+    /// `margin_deg`: `|a12_s' - a12_s| rho_abs`. The identified modes scale the velocity state
+    /// differently (a12 is -0.003, 0.0021 and 0.0442 in Table I), so a fast plate crossing a
+    /// mode boundary jumps by degrees in one step, and an estimate a fraction of a degree off
+    /// the boundary predicts the jump one step early or late. Below 16 deg the velocity state
+    /// hardly moves the angle, so it is poorly observed there: give a bound, not the estimate.
+    pub fn mode_switch_spread_deg(&self, theta_deg: f64, rho_abs: f64, margin_deg: f64) -> f64 {
+        let theta = theta_deg;
         let s = mode_index(&self.params, theta);
         let lo = mode_index(&self.params, theta - margin_deg);
         let hi = mode_index(&self.params, theta + margin_deg);
         let a12 = self.params.modes[s].a12;
         (lo..=hi)
-            .map(|t| (self.params.modes[t].a12 - a12).abs() * x[1].abs())
+            .map(|t| (self.params.modes[t].a12 - a12).abs() * rho_abs)
             .fold(0.0, f64::max)
             / self.params.angle_scale
     }
@@ -421,6 +423,23 @@ mod tests {
         // pieces 7 deg apart at 10 deg; the degree reading keeps one piece per mode.
         let jump = model.static_angle_deg(1, 0.4, true) - model.static_angle_deg(1, 0.4, false);
         assert!((jump - 7.4).abs() < 0.1, "jump {jump}");
+    }
+
+    #[test]
+    fn a_mode_switch_spread_appears_only_near_a_boundary() {
+        let model = ThrottleModel::new(table1()).expect("valid");
+        let m = &model.params().modes;
+        // 0.5 deg below 16 deg with the velocity state at 10: mode 3 is within the margin.
+        let near = model.mode_switch_spread_deg(15.5, 10.0, 1.5);
+        let expect = (m[2].a12 - m[1].a12).abs() * 10.0 / model.params().angle_scale;
+        assert!((near - expect).abs() < 1e-12, "{near} vs {expect}");
+        assert!(near > 4.0, "a 16 deg crossing at rho = 10 jumps {near} deg");
+        // Far from every boundary, or at rest, nothing.
+        assert_eq!(model.mode_switch_spread_deg(40.0, 10.0, 1.5), 0.0);
+        assert_eq!(model.mode_switch_spread_deg(15.5, 0.0, 1.5), 0.0);
+        // Near 8 deg the modes differ little in a12.
+        let low = model.mode_switch_spread_deg(8.5, 10.0, 1.5);
+        assert!(low > 0.0 && low < 1.0, "{low}");
     }
 
     #[test]

@@ -84,6 +84,11 @@ pub struct ThrottleMonitorConfig {
     /// Mode switches within this many degrees of the estimate count as possible in the
     /// allowance (see `ThrottleModel::mode_switch_spread_deg`).
     pub tps_step_mode_margin_deg: f64,
+    /// Smallest velocity-state magnitude (model units) assumed for that allowance: below
+    /// 16 deg the velocity state hardly moves the angle (a12 = 0.0021), so the filter's estimate
+    /// of it can be far below the plate's; plates of the tuning set crossed 16 deg with the
+    /// state at up to 10.7 (a 4.5 deg jump), none above 12.
+    pub tps_step_rho_floor: f64,
     /// CUSUM on the combined filter's wattmeter innovation.
     pub watt_cusum_min_bias_sigma: f64,
     pub watt_cusum_threshold: f64,
@@ -96,6 +101,10 @@ pub struct ThrottleMonitorConfig {
     /// predicted reading widen the dead band (4 % is the spread of the tuning set's healthy
     /// wattmeters; a shunt 11 % or more off is a fault).
     pub watt_gain_tolerance: f64,
+    /// A wattmeter may lag the current by up to this (s): `(lag * predicted reading rate)^2` is
+    /// added to its innovation variance (the current follows a voltage step within tens of
+    /// milliseconds, so a few milliseconds of lag read tenths of a watt off).
+    pub watt_lag_tolerance_s: f64,
     /// A wattmeter fault is named only after this many alarms of its test within
     /// `watt_confirm_s` of the first (the test restarts after each alarm; a fault keeps it
     /// alarming, a burst of model error does not).
@@ -170,12 +179,14 @@ impl Default for ThrottleMonitorConfig {
             tps_step_floor_v: 0.02,
             tps_step_motion_scale: 1.0,
             tps_step_mode_margin_deg: 1.5,
+            tps_step_rho_floor: 12.0,
             watt_cusum_min_bias_sigma: 0.5,
             watt_cusum_threshold: 35.0,
             tps_tolerance_v: 0.0,
             tps_lag_tolerance_s: 0.003,
             watt_model_error_w: 0.05,
             watt_gain_tolerance: 0.04,
+            watt_lag_tolerance_s: 0.003,
             watt_confirm_alarms: 3,
             watt_confirm_s: 2.0,
             tps_noise_min_v: 0.0052,
