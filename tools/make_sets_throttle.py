@@ -266,9 +266,64 @@ def heldout():
     return items
 
 
+def calibration():
+    """One plant beyond the default configuration's range (wattmeter noise 0.9 W against the
+    default's 0.8 W limit, Table I 2 % off, a restitution at the stops, sensor tolerances): a
+    30-minute fault-free log to calibrate on (`throttle_calibrate_train/`) and logs of the same
+    plant (`plant.seed`) with other seeds, excitation styles and fault sizes 0.75-1.5x to judge
+    the calibrated and the default configuration on (`throttle_calibrate_heldout/`)."""
+    rng = random.Random(21)
+    sensors = {
+        "wattmeter_noise_std_w": 0.9,
+        "tps_noise_std_v": 0.008,
+        "tps_gain": 1.01,
+        "tps_offset_v": 0.01,
+        "wattmeter_gain": 1.02,
+        "tps_lag_s": 0.0015,
+        "wattmeter_lag_s": 0.002,
+    }
+    plant = {
+        "table1_rel_error": 0.02,
+        "table1_max_draws": 1000,
+        "stop_restitution": 0.2,
+        "process_noise_scale": 1.0,
+        "seed": 424242,
+    }
+    train = []
+    name = "throttle_calibrate_train_00_nominal"
+    train.append((name, scenario(name, 3000, 1800, {"kind": "mixed"}, sensors, plant,
+                                 {"kind": "none"},
+                                 comment="calibration: 30 min fault-free of the plant")))
+    held = []
+    styles = ["pulse_train", "chirp", "pedal_ramps", "steady_holds", "idle_blips"]
+    n = 0
+    for i in range(2):
+        name = "throttle_calibrate_heldout_%02d_nominal" % n
+        held.append((name, scenario(name, 3100 + n, 1800, {"kind": styles[n % len(styles)]},
+                                    sensors, plant, {"kind": "none"},
+                                    comment="calibration held-out: 30 min fault-free")))
+        n += 1
+    for kind in KINDS:
+        for j in range(2):
+            start = float(rng.randint(120, 240))
+            scale = rng.uniform(0.75, 1.5)
+            f = fault_table(rng, kind, start, scale)
+            name = "throttle_calibrate_heldout_%02d_%s" % (n, kind)
+            held.append((name, scenario(name, 3100 + n, start + 60,
+                                        {"kind": styles[n % len(styles)]}, sensors, plant, f,
+                                        comment="calibration held-out: %s from %g s, size x%.2f"
+                                        % (kind, start, scale))))
+            n += 1
+    return train, held
+
+
 if __name__ == "__main__":
     t = tuning()
     h = heldout()
+    ct, ch = calibration()
     write_set("throttle_tuning", t)
     write_set("throttle_heldout", h)
-    print("wrote %d tuning and %d held-out throttle scenarios" % (len(t), len(h)))
+    write_set("throttle_calibrate_train", ct)
+    write_set("throttle_calibrate_heldout", ch)
+    print("wrote %d tuning, %d held-out and %d + %d calibration throttle scenarios"
+          % (len(t), len(h), len(ct), len(ch)))
