@@ -317,6 +317,7 @@ mod tests {
             current_a: 3.0,
             fault: "none".into(),
             fault_active: false,
+            fault_observable: None,
         };
         let intake = fdd_monitor::log::messages::IntakeTruth {
             p_m_pa: 1.0,
@@ -453,6 +454,7 @@ mod tests {
                             current_a: x[2],
                             fault: fault.into(),
                             fault_active: active,
+                            fault_observable: None,
                         })
                     } else {
                         serde_json::to_string(&fdd_monitor::log::messages::IntakeTruth {
@@ -512,6 +514,7 @@ mod tests {
                     current_a: -x,
                     fault: "tps_stuck".into(),
                     fault_active: active,
+                    fault_observable: None,
                 };
                 let data = serde_json::to_vec(&truth).unwrap();
                 for field in ["angle_deg", "velocity", "current_a", "fault", "x"] {

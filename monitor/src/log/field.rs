@@ -468,6 +468,7 @@ mod tests {
                     current_a: -y,
                     fault: "tps_stuck".into(),
                     fault_active: true,
+                    fault_observable: None,
                 };
                 let json = serde_json::to_vec(&truth).unwrap();
                 for key in ["angle_deg", "velocity", "current_a", "fault", "fault_active", "x"] {

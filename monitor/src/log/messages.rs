@@ -67,6 +67,11 @@ pub struct ThrottleTruth {
     pub fault: String,
     /// Whether the fault is active at this sample.
     pub fault_active: bool,
+    /// Whether the active fault changes a reading at this sample by more than a healthy part
+    /// could (simulated logs since the throttle simulator marks it; absent in older logs,
+    /// read as `fault_active`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fault_observable: Option<bool>,
 }
 
 /// `/intake/engine_speed`: engine speed over one 180 deg crank segment (the intake model's

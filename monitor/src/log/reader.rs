@@ -1522,6 +1522,7 @@ mod direct_chunk_tests {
                     current_a: 0.5,
                     fault: "none".into(),
                     fault_active: false,
+                    fault_observable: None,
                 };
                 w.write_message(t, &truth).expect("write");
             }

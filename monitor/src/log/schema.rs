@@ -95,7 +95,8 @@ pub const THROTTLE_TRUTH: TopicSchema = TopicSchema {
     "velocity": {"type": ["number", "null"], "description": "true plate angular velocity rho, in the identified throttle model's own units"},
     "current_a": {"type": ["number", "null"], "description": "true motor current, A"},
     "fault": {"type": "string", "description": "scenario fault name, e.g. none, tps_stuck"},
-    "fault_active": {"type": "boolean", "description": "whether the fault is active at this sample"}
+    "fault_active": {"type": "boolean", "description": "whether the fault is active at this sample"},
+    "fault_observable": {"type": "boolean", "description": "whether the active fault changes a reading at this sample by more than a healthy part could (TPS: 0.1 V; wattmeter: 0.05 W; stuck plate: 2 deg from where the voltage would hold it); absent: as fault_active"}
   },
   "required": ["angle_deg", "velocity", "current_a", "fault", "fault_active"],
   "additionalProperties": false
@@ -512,6 +513,12 @@ mod tests {
 
     /// The schema's properties and required list are exactly the keys serde writes.
     fn check<T: TopicMessage>(example: &T) {
+        check_optional(example, &[]);
+    }
+
+    /// As [`check`], with `optional` properties that the example writes but that are not
+    /// required (absent in older logs).
+    fn check_optional<T: TopicMessage>(example: &T, optional: &[&str]) {
         let schema: Value = serde_json::from_str(T::SCHEMA.schema)
             .unwrap_or_else(|e| panic!("{}: schema is not JSON: {e}", T::SCHEMA.schema_name));
         assert_eq!(schema["title"], T::SCHEMA.schema_name);
@@ -526,7 +533,12 @@ mod tests {
             .map(|v| v.as_str().unwrap().to_string())
             .collect();
         required.sort();
-        assert_eq!(required, props, "{}", T::SCHEMA.schema_name);
+        let expect: Vec<String> = props
+            .iter()
+            .filter(|p| !optional.contains(&p.as_str()))
+            .cloned()
+            .collect();
+        assert_eq!(required, expect, "{}", T::SCHEMA.schema_name);
         for (name, p) in schema["properties"].as_object().unwrap() {
             assert!(
                 p.get("description").is_some() || p.get("enum").is_some(),
@@ -541,13 +553,17 @@ mod tests {
         check(&MotorVoltage { voltage_v: 1.0 });
         check(&TpsVoltage { voltage_v: 1.0 });
         check(&Wattmeter { power_w: 1.0 });
-        check(&ThrottleTruth {
-            angle_deg: 1.0,
-            velocity: 0.0,
-            current_a: 0.1,
-            fault: "none".into(),
-            fault_active: false,
-        });
+        check_optional(
+            &ThrottleTruth {
+                angle_deg: 1.0,
+                velocity: 0.0,
+                current_a: 0.1,
+                fault: "none".into(),
+                fault_active: false,
+                fault_observable: Some(false),
+            },
+            &["fault_observable"],
+        );
         check(&EngineSpeed { speed_rpm: 800.0 });
         check(&ThrottleAngle { angle_deg: 3.0 });
         check(&EgrCommand { position: 0.3 });

@@ -54,6 +54,7 @@ pub fn examples() -> Examples {
             current_a: 0.5,
             fault: "tps_stuck".into(),
             fault_active: true,
+            fault_observable: None,
         },
         position: PositionEstimate {
             angle_deg: 22.0,
