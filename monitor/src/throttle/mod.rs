@@ -270,6 +270,8 @@ pub struct ThrottleMonitor {
     last_predicted_w: f64,
     /// Steps in a row the plate has been static while driven, and how many make it stuck.
     static_run: u32,
+    /// Steps in a row the TPS has been frozen while the voltage should move the plate.
+    frozen_driven_run: u32,
     plate_persist: u32,
     /// The diagnosis scores of the latest step (see [`Output::Diagnosis`]).
     scores: [f64; 7],
@@ -485,6 +487,7 @@ impl ThrottleMonitor {
             watt_noise,
             noise_steps: 0,
             static_run: 0,
+            frozen_driven_run: 0,
             plate_persist: ((cfg.plate_persist_s / cfg.period_s).round() as u32).max(1),
             scores: [0.0; 7],
             events,
@@ -540,6 +543,7 @@ impl ThrottleMonitor {
         self.plate_fault = None;
         self.heal_run = [0; 3];
         self.static_run = 0;
+        self.frozen_driven_run = 0;
         self.tps_noise.reset();
         self.last_theta_pred = f64::NAN;
         self.last_predicted_w = f64::NAN;
@@ -718,6 +722,30 @@ impl ThrottleMonitor {
                 };
                 self.set_failed(ThrottleFault::TpsIntermittent, r, now_s);
             }
+        }
+        // A frozen TPS (identical readings: a healthy sensor's noise toggles the ADC code) while
+        // the voltage should move the plate is a stuck sensor on its own, for as long as the
+        // plate test would need: the TPS filter follows a frozen reading and its tests do not
+        // fire while the plate moves.
+        let frozen_driven = self.tps_fault.is_none()
+            && self.plate_fault.is_none()
+            && self.frozen_run >= self.cfg.frozen_samples
+            && self.static_while_driven();
+        self.frozen_driven_run = if frozen_driven {
+            self.frozen_driven_run + 1
+        } else {
+            0
+        };
+        if self.frozen_driven_run >= self.plate_persist {
+            self.frozen_driven_run = 0;
+            let r = TestResult {
+                value: f64::from(self.frozen_run),
+                min: 0.0,
+                max: f64::from(self.cfg.frozen_samples.saturating_sub(1)),
+                verdict: Verdict::Failed,
+            };
+            self.set_failed(ThrottleFault::TpsStuck, r, now_s);
+            self.end_episode();
         }
         // The stuck-plate test runs on its own (a trusted TPS that does not move while the
         // voltage should move the plate, and is not frozen: that would be the sensor).
