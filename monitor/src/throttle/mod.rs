@@ -12,22 +12,29 @@
 //!   track, as in the Table II reproduction).
 //!
 //! Tests: a jump/noise test (windowed sum of capped TPS NIS), a CUSUM on the TPS filter's
-//! normalized innovation, a CUSUM on the combined filter's wattmeter innovation, rail checks
-//! that judge a TPS reading at 0 V / 5 V against the model (a closed plate also reads 0 V), a
-//! frozen-signal check, and a "static while driven" check for the plate.
+//! normalized innovation, a step test (the TPS change over a few samples against the model's
+//! predicted change, [`step_test`]), a CUSUM on the combined filter's wattmeter innovation, rail
+//! checks that judge a TPS reading at 0 V / 5 V against the model (a closed plate also reads
+//! 0 V), a frozen-signal check, and a "static while driven" check for the plate. Every TPS test
+//! allows for a sensor lag (`tps_lag_tolerance_s`) and for a mode switch of the identified model
+//! one step early or late; the wattmeter test for a gain tolerance and a lag.
 //!
 //! Decision: an open circuit / short is a rail reading the model calls implausible that lasts
 //! `rail_persist_s`; shorter episodes are dropouts, and `intermittent_count` of them within
-//! `intermittent_window_s` make an intermittent circuit. When a residual test fails, the monitor
-//! waits `decision_window_s` for the other tests, then names the fault: frozen TPS -> TPS stuck
-//! (P0121); TPS static while the voltage should move the plate, not frozen -> plate stuck
-//! (P2119); only the wattmeter test -> wattmeter (P1651, manufacturer code); otherwise TPS
+//! `intermittent_window_s` make an intermittent circuit. A TPS frozen while the voltage should
+//! move the plate, for `plate_persist_s`, is a stuck TPS (P0121); a TPS static (not frozen) while
+//! driven, as long, is a stuck plate (P2119). When a residual test fails, the monitor waits
+//! `decision_window_s` for the other tests (and for the plate test while it is counting), then
+//! names the fault: frozen TPS -> TPS stuck; only the wattmeter test, confirmed
+//! `watt_confirm_alarms` times -> wattmeter (P1651, manufacturer code); otherwise TPS
 //! range/performance (P0121).
 //!
-//! Recovery policy: a TPS fault is latched for the rest of the operation cycle. From the step
-//! it is qualified, the position output comes from the wattmeter estimate (`source =
-//! "wattmeter_estimate"`), the TPS is no longer used by any filter, and the switch is reported as
-//! an event. A new operation cycle starts again from the TPS. A wattmeter or plate fault never
+//! Recovery policy: decisions are per component (TPS, wattmeter, plate), and each removes from
+//! use only what it makes untrustworthy. From the step a TPS fault is qualified, the position
+//! output comes from the wattmeter estimate (`source = "wattmeter_estimate"`) and the switch is
+//! reported as an event; the TPS filter keeps running on the sensor so that its tests see it
+//! heal. A component whose tests pass for `heal_s` is healthy again (a range/performance fault
+//! also needs the TPS to agree with the wattmeter estimate). A wattmeter or plate fault never
 //! switches the output (the TPS stays the source).
 
 pub mod config;
