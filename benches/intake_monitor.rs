@@ -11,30 +11,16 @@ use fdd_fixtures::intake_profile::{MixedSpec, ProfileSpec};
 use fdd_fixtures::intake_sim::{default_intake_model, IntakeFault, IntakeScenario, IntakeSim};
 use fdd_monitor::intake::{IntakeMonitor, IntakeMonitorConfig, Segment};
 use fdd_monitor::monitor::Monitor;
-use fdd_monitor::signal_table::{SignalSpec, SignalTable};
+use fdd_monitor::signal_table::SignalTable;
 
 fn main() {
     divan::main();
 }
 
 fn table() -> SignalTable {
-    let names = [
-        "engine_speed",
-        "intake_throttle",
-        "egr_command",
-        "map",
-        "maf",
-    ];
-    SignalTable::new(
-        names
-            .iter()
-            .map(|n| SignalSpec {
-                name: n.to_string(),
-                max_age_ns: 250_000_000,
-            })
-            .collect(),
-    )
-    .expect("table")
+    // One segment of 100 ms at the slowest speed the model accepts; 250 ms is lost.
+    SignalTable::with_names(&IntakeMonitorConfig::default().signal_names(), 250_000_000)
+        .expect("table")
 }
 
 /// Segments of a drive whose speed stays near `speed` rpm (+-10 %).

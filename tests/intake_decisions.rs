@@ -13,25 +13,12 @@ use fdd_fixtures::intake_profile::{IdleSpec, ProfileSpec, TipInOutSpec};
 use fdd_fixtures::intake_sim::{default_intake_model, IntakeFault, IntakeScenario, IntakeSim};
 use fdd_monitor::intake::{IntakeMonitor, IntakeMonitorConfig, Segment, GROUP_EVENT};
 use fdd_monitor::monitor::{Monitor, Output};
-use fdd_monitor::signal_table::{SignalSpec, SignalTable};
+use fdd_monitor::signal_table::SignalTable;
 
 fn table() -> SignalTable {
-    SignalTable::new(
-        [
-            "engine_speed",
-            "intake_throttle",
-            "egr_command",
-            "map",
-            "maf",
-        ]
-        .iter()
-        .map(|n| SignalSpec {
-            name: n.to_string(),
-            max_age_ns: 250_000_000,
-        })
-        .collect(),
-    )
-    .expect("table")
+    // One segment of 100 ms at the slowest speed the model accepts; 250 ms is lost.
+    SignalTable::with_names(&IntakeMonitorConfig::default().signal_names(), 250_000_000)
+        .expect("table")
 }
 
 /// One testFailed change of an event.

@@ -24,7 +24,7 @@ use fdd_monitor::intake::{
 };
 use fdd_monitor::log::LogReader;
 use fdd_monitor::monitor::{Monitor, Output};
-use fdd_monitor::signal_table::{SignalSpec, SignalTable};
+use fdd_monitor::signal_table::SignalTable;
 
 /// One segment with what the truth says about the fault.
 struct Frame {
@@ -55,23 +55,9 @@ struct Outcome {
 }
 
 fn table() -> SignalTable {
-    let names = [
-        "engine_speed",
-        "intake_throttle",
-        "egr_command",
-        "map",
-        "maf",
-    ];
-    SignalTable::new(
-        names
-            .iter()
-            .map(|n| SignalSpec {
-                name: n.to_string(),
-                max_age_ns: 250_000_000,
-            })
-            .collect(),
-    )
-    .expect("table")
+    // One segment of 100 ms at the slowest speed the model accepts; 250 ms is lost.
+    SignalTable::with_names(&IntakeMonitorConfig::default().signal_names(), 250_000_000)
+        .expect("table")
 }
 
 const RESIDUAL_TESTS: [&str; 7] = [

@@ -10,7 +10,7 @@ use fdd_fixtures::intake_sim::{IntakeFault, IntakeScenario, IntakeSim};
 use fdd_monitor::intake::IntakeMonitor;
 use fdd_monitor::monitor::Output;
 use fdd_monitor::scheduler::Scheduler;
-use fdd_monitor::signal_table::{SignalSpec, SignalTable};
+use fdd_monitor::signal_table::SignalTable;
 
 #[global_allocator]
 static GLOBAL: fdd_testkit::CountingAllocator = fdd_testkit::CountingAllocator;
@@ -27,16 +27,7 @@ const NAMES: [&str; 5] = [
 fn intake_monitor_segments_allocate_nothing() {
     let cfg = IntakeConfig::load(None).expect("embedded config");
     let model = IntakeModel::new(cfg.model, ThrottleFlow::Nozzle).expect("model");
-    let mut table = SignalTable::new(
-        NAMES
-            .iter()
-            .map(|n| SignalSpec {
-                name: n.to_string(),
-                max_age_ns: 250_000_000,
-            })
-            .collect(),
-    )
-    .expect("table");
+    let mut table = SignalTable::with_names(&NAMES, 250_000_000).expect("table");
     let ids = NAMES.map(|n| table.id(n).expect("declared"));
     let monitor = IntakeMonitor::new(&model, &cfg.monitor, &table).expect("monitor");
     let mut sched = Scheduler::new(0);

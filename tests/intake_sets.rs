@@ -21,27 +21,14 @@ use fdd::evaluate::fault_types::INTAKE;
 use fdd_diagnostics::dtc::StatusBit;
 use fdd_estimators::models::intake::{IntakeModel, ThrottleFlow};
 use fdd_fixtures::intake_sim::{IntakeScenario, IntakeSim};
-use fdd_monitor::intake::{IntakeMonitor, Segment, GROUP_EVENT};
+use fdd_monitor::intake::{IntakeMonitor, IntakeMonitorConfig, Segment, GROUP_EVENT};
 use fdd_monitor::monitor::{Monitor, Output};
-use fdd_monitor::signal_table::{SignalSpec, SignalTable};
+use fdd_monitor::signal_table::SignalTable;
 
 fn table() -> SignalTable {
-    SignalTable::new(
-        [
-            "engine_speed",
-            "intake_throttle",
-            "egr_command",
-            "map",
-            "maf",
-        ]
-        .iter()
-        .map(|n| SignalSpec {
-            name: n.to_string(),
-            max_age_ns: 250_000_000,
-        })
-        .collect(),
-    )
-    .expect("table")
+    // One segment of 100 ms at the slowest speed the model accepts; 250 ms is lost.
+    SignalTable::with_names(&IntakeMonitorConfig::default().signal_names(), 250_000_000)
+        .expect("table")
 }
 
 /// One raised DTC.

@@ -69,6 +69,20 @@ pub struct SignalTable {
 }
 
 impl SignalTable {
+    /// A table of the named signals, all lost after `max_age_ns` (a test or a host whose
+    /// signals share one rate).
+    pub fn with_names(names: &[&str], max_age_ns: u64) -> Result<Self, TableError> {
+        Self::new(
+            names
+                .iter()
+                .map(|n| SignalSpec {
+                    name: (*n).to_string(),
+                    max_age_ns,
+                })
+                .collect(),
+        )
+    }
+
     /// Builds a table of the given signals.
     pub fn new(specs: Vec<SignalSpec>) -> Result<Self, TableError> {
         for (i, s) in specs.iter().enumerate() {
@@ -170,6 +184,20 @@ impl fmt::Display for SignalId {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_table_from_names_shares_one_age_and_refuses_a_repeated_name() {
+        let t = SignalTable::with_names(&["map", "maf"], 7).expect("table");
+        assert!(t.id("map").is_some() && t.id("maf").is_some() && t.id("tps").is_none());
+        assert!(matches!(
+            SignalTable::with_names(&["map", "map"], 7),
+            Err(TableError::Duplicate(n)) if n == "map"
+        ));
+        assert!(matches!(
+            SignalTable::with_names(&["map"], 0),
+            Err(TableError::ZeroAge(_))
+        ));
+    }
 
     fn table() -> SignalTable {
         SignalTable::new(vec![

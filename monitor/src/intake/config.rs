@@ -214,6 +214,20 @@ pub struct IntakeMonitorConfig {
     pub dtc_group: String,
 }
 
+impl IntakeMonitorConfig {
+    /// The runtime names of the five signals the monitor reads: engine speed, throttle angle,
+    /// EGR command, MAP, MAF.
+    pub fn signal_names(&self) -> [&str; 5] {
+        [
+            &self.speed_signal,
+            &self.throttle_signal,
+            &self.egr_signal,
+            &self.map_signal,
+            &self.maf_signal,
+        ]
+    }
+}
+
 impl Default for IntakeMonitorConfig {
     fn default() -> Self {
         Self {
