@@ -33,6 +33,14 @@ struct Run {
 }
 
 impl Run {
+    /// When a DTC starting with `code` was first raised.
+    fn first_raised(&self, code: &str) -> Option<f64> {
+        self.raised
+            .iter()
+            .find(|(_, d)| d.starts_with(code))
+            .map(|(t, _)| *t)
+    }
+
     fn err_std(&self) -> f64 {
         let n = self.err.0.max(1) as f64;
         let m = self.err.1 / n;
@@ -300,18 +308,12 @@ start_s = 35.0
 bias_deg = 8.0
 "#,
     );
-    let first = |code: &str| {
-        r.raised
-            .iter()
-            .find(|(_, d)| d.starts_with(code))
-            .map(|(t, _)| *t)
-    };
     assert!(r.raised.iter().all(|(t, _)| *t >= 20.0), "{:?}", r.raised);
-    let watt = first("P1651").expect("wattmeter DTC");
+    let watt = r.first_raised("P1651").expect("wattmeter DTC");
     assert!((20.0..22.0).contains(&watt), "P1651 at {watt}");
-    let tps = first("P0121").expect("TPS DTC after the wattmeter's");
+    let tps = r.first_raised("P0121").expect("TPS DTC after the wattmeter's");
     assert!((35.0..36.0).contains(&tps), "P0121 at {tps}");
-    let switch = first("P2106").expect("switch");
+    let switch = r.first_raised("P2106").expect("switch");
     assert!((switch - tps).abs() < 0.002, "switch {switch}, TPS {tps}");
 }
 
@@ -362,4 +364,62 @@ end_s = 30.0
     }
     let back = r.back_to_tps_s.expect("output back to the TPS");
     assert!(back > 30.0 && back < 30.0 + heal + 1.0, "back at {back}");
+}
+
+/// And the reverse: after a TPS open circuit the combined filter has no TPS, and the
+/// wattmeter-only filter's test still finds a wattmeter fault later in the cycle (the position
+/// output then falls back to the model alone). The open circuit does not heal meanwhile: a 0 V
+/// reading that the model alone cannot rule out is no evidence of a repair.
+#[test]
+fn a_tps_fault_then_a_wattmeter_fault_give_both_dtcs() {
+    let r = run_scenario(
+        r#"
+name = "throttle_tps_then_watt"
+monitor = "throttle"
+duration_s = 60.0
+seed = 45
+[excitation]
+kind = "steady_holds"
+level_v = [0.5, 1.0]
+hold_s = [3.0, 8.0]
+[fault]
+kind = "tps_open"
+start_s = 20.0
+[second_fault]
+kind = "wattmeter"
+start_s = 35.0
+gain = 1.0
+offset_w = 0.3
+"#,
+    );
+    assert!(r.raised.iter().all(|(t, _)| *t >= 20.0), "{:?}", r.raised);
+    let open = r.first_raised("P0122").expect("TPS open DTC");
+    assert!((20.0..20.1).contains(&open), "P0122 at {open}");
+    let watt = r.first_raised("P1651").expect("wattmeter DTC after the TPS's");
+    assert!((35.0..41.0).contains(&watt), "P1651 at {watt}");
+    assert!(
+        r.cleared.iter().all(|(_, d, _)| d != "P0122-16"),
+        "the open circuit healed: {:?}",
+        r.cleared
+    );
+}
+
+/// A slowly drifting TPS pulls the combined filter, whose predicted current then misses the
+/// wattmeter: its wattmeter test fires first. The wattmeter-only filter, which never sees the
+/// TPS, stays quiet, so the fault is the TPS's (P0121), never the wattmeter's.
+#[test]
+fn a_drifting_tps_is_not_blamed_on_the_wattmeter() {
+    // A tuning-set log (a plant and sensors off the monitor's model, pulses): before the
+    // wattmeter-only filter this drift got P1651 alone, 13 s after its onset.
+    let r = run_scenario(include_str!(
+        "../fixtures/sets/throttle_tuning/throttle_tuning_14_tps_drift.toml"
+    ));
+    let codes: Vec<&str> = r.raised.iter().map(|(_, d)| d.as_str()).collect();
+    assert!(codes.contains(&"P0121-64"), "{:?}", r.raised);
+    assert!(
+        !codes.iter().any(|c| c.starts_with("P1651")),
+        "{:?}",
+        r.raised
+    );
+    assert!(r.raised.iter().all(|(t, _)| *t >= 104.0), "{:?}", r.raised);
 }

@@ -92,6 +92,10 @@ pub struct ThrottleMonitorConfig {
     /// CUSUM on the combined filter's wattmeter innovation.
     pub watt_cusum_min_bias_sigma: f64,
     pub watt_cusum_threshold: f64,
+    /// Threshold of the same CUSUM on the wattmeter-only filter's innovation (same minimum
+    /// bias): that filter does not know the plate's angle, so its residuals carry more model
+    /// error.
+    pub watt_only_cusum_threshold: f64,
     /// Wattmeter residuals within +-this (W) count as model error, not as evidence of a
     /// wattmeter fault (a dead band before the CUSUM): a plant a percent off Table I leaves
     /// residual means of a few hundredths of a watt, which a quiet wattmeter's CUSUM would
@@ -182,6 +186,7 @@ impl Default for ThrottleMonitorConfig {
             tps_step_rho_floor: 12.0,
             watt_cusum_min_bias_sigma: 0.5,
             watt_cusum_threshold: 35.0,
+            watt_only_cusum_threshold: 35.0,
             tps_tolerance_v: 0.0,
             tps_lag_tolerance_s: 0.003,
             watt_model_error_w: 0.05,

@@ -9,11 +9,17 @@
 //!   are currently trusted (`update_subset`). Its wattmeter innovation says whether the current
 //!   the wattmeter sees fits the TPS angle; once the TPS is failed it runs on the wattmeter
 //!   alone and is the fallback position estimate (re-seeded at the static map if it loses
-//!   track, as in the Table II reproduction).
+//!   track, as in the Table II reproduction);
+//! - the **wattmeter-only filter**: model + wattmeter, never the TPS. Its innovation is a
+//!   wattmeter residual that no TPS fault can move: the combined filter's is pulled by a
+//!   drifting TPS (it follows the TPS angle, and the current it predicts for that angle misses
+//!   the wattmeter), so it tells the two apart, and it keeps the wattmeter tested after a TPS
+//!   fault.
 //!
 //! Tests: a jump/noise test (windowed sum of capped TPS NIS), a CUSUM on the TPS filter's
 //! normalized innovation, a step test (the TPS change over a few samples against the model's
-//! predicted change, [`step_test`]), a CUSUM on the combined filter's wattmeter innovation, rail
+//! predicted change, [`step_test`]), CUSUMs on the combined and the wattmeter-only filters'
+//! wattmeter innovations, rail
 //! checks that judge a TPS reading at 0 V / 5 V against the model (a closed plate also reads
 //! 0 V), a frozen-signal check, and a "static while driven" check for the plate. Every TPS test
 //! allows for a sensor lag (`tps_lag_tolerance_s`) and for a mode switch of the identified model
@@ -25,9 +31,15 @@
 //! move the plate, for `plate_persist_s`, is a stuck TPS (P0121); a TPS static (not frozen) while
 //! driven, as long, is a stuck plate (P2119). When a residual test fails, the monitor waits
 //! `decision_window_s` for the other tests (and for the plate test while it is counting), then
-//! names the fault: frozen TPS -> TPS stuck; only the wattmeter test, confirmed
-//! `watt_confirm_alarms` times -> wattmeter (P1651, manufacturer code); otherwise TPS
-//! range/performance (P0121).
+//! names the fault: frozen TPS -> TPS stuck; only the combined wattmeter test, confirmed
+//! `watt_confirm_alarms` times within `watt_confirm_s`, and the wattmeter-only test alarming
+//! too -> wattmeter (P1651, manufacturer code); the combined wattmeter test confirmed with the
+//! wattmeter-only test quiet and the TPS away from the wattmeter-only angle -> TPS
+//! range/performance (a drift); a TPS test -> TPS range/performance (P0121). With the TPS
+//! failed, the wattmeter-only test alone names a wattmeter fault, if still alarming after twice
+//! `watt_confirm_s` (model error fails it in bursts). An open or short circuit heals on readings
+//! off the rails, or on rail readings the wattmeter estimate cannot rule out (not the model
+//! alone).
 //!
 //! Recovery policy: decisions are per component (TPS, wattmeter, plate), and each removes from
 //! use only what it makes untrustworthy. From the step a TPS fault is qualified, the position
@@ -42,7 +54,9 @@ pub mod step_test;
 
 use fdd_diagnostics::detectors::{two_sided_arl, Cusum, CusumConfig};
 use fdd_diagnostics::{TestResult, Verdict};
-use fdd_estimators::models::throttle::{PositionAndWattmeter, PositionSensor, ThrottleModel};
+use fdd_estimators::models::throttle::{
+    PositionAndWattmeter, PositionSensor, ThrottleModel, Wattmeter,
+};
 use fdd_estimators::reacquire::Reacquire;
 use fdd_estimators::{NoiseLevel, SigmaPoints, Ukf};
 use nalgebra::{Matrix1, Matrix2, Matrix3, Vector1, Vector2, Vector3};
@@ -233,13 +247,19 @@ pub struct ThrottleMonitor {
     both_ukf: Ukf<ThrottleModel, PositionAndWattmeter, 3, 2, 1, 7>,
     tps_ukf_init: Ukf<ThrottleModel, PositionSensor, 3, 1, 1, 7>,
     both_ukf_init: Ukf<ThrottleModel, PositionAndWattmeter, 3, 2, 1, 7>,
+    /// A filter fed by the wattmeter alone, never the TPS: its innovation is a wattmeter residual
+    /// that a TPS fault cannot move (the combined filter's is pulled by a drifting TPS).
+    watt_ukf: Ukf<ThrottleModel, Wattmeter, 3, 1, 1, 7>,
+    watt_ukf_init: Ukf<ThrottleModel, Wattmeter, 3, 1, 1, 7>,
     reacquire: Reacquire,
+    watt_reacquire: Reacquire,
     u_slow: f64,
     u_alpha: f64,
     nis_ring: Ring,
     nis_sum: f64,
     cusum_tps: Cusum,
     cusum_watt: Cusum,
+    cusum_watt_only: Cusum,
     tps_hist: Ring,
     eq_hist: Ring,
     rail_persist: u32,
@@ -250,11 +270,14 @@ pub struct ThrottleMonitor {
     last_tps: f64,
     first_fail_s: Option<f64>,
     /// Residual tests that failed in this episode: TPS NIS window, TPS CUSUM, wattmeter
-    /// CUSUM, TPS step.
-    fired: [bool; 4],
+    /// CUSUM, TPS step, wattmeter-only CUSUM.
+    fired: [bool; 5],
     step_test: StepTest,
     /// Wattmeter test alarms in the current episode.
     watt_alarms: u32,
+    /// Times of the latest wattmeter-only test alarms (s), and their count in the episode.
+    watt_only_hits: Ring,
+    watt_only_alarms: u32,
     /// The first failing residual test's result, kept through the decision window.
     first_result: TestResult,
     /// The fault decided per component (position sensor, wattmeter, plate): each removes from
@@ -275,6 +298,8 @@ pub struct ThrottleMonitor {
     last_theta_pred: f64,
     /// The wattmeter reading predicted at the previous step (W), for the predicted rate.
     last_predicted_w: f64,
+    /// The same for the wattmeter-only filter (W).
+    last_predicted_wo: f64,
     /// Steps in a row the plate has been static while driven, and how many make it stuck.
     static_run: u32,
     /// Steps in a row the TPS has been frozen while the voltage should move the plate.
@@ -340,8 +365,11 @@ impl ThrottleMonitor {
                 return Err(setting(key, format!("{v} must be a non-negative number")));
             }
         }
-        if cfg.watt_confirm_alarms == 0 {
-            return Err(setting("watt_confirm_alarms", "must be at least 1"));
+        if cfg.watt_confirm_alarms == 0 || cfg.watt_confirm_alarms as usize > RING {
+            return Err(setting(
+                "watt_confirm_alarms",
+                format!("must be 1..={RING}"),
+            ));
         }
         if !(cfg.rail_low_v < cfg.rail_high_v) {
             return Err(setting("rail_low_v", "must be below rail_high_v"));
@@ -415,6 +443,15 @@ impl ThrottleMonitor {
             q,
             Matrix2::new(rt, 0.0, 0.0, rw),
         )?;
+        let watt_ukf = Ukf::new(
+            model,
+            Wattmeter,
+            SigmaPoints::ahsm(12.0)?,
+            Vector3::zeros(),
+            p0,
+            q,
+            Matrix1::new(cfg.fallback_r_scale * rw),
+        )?;
         let cusum =
             |key: &'static str, delta: f64, h: f64| -> Result<Cusum, ThrottleMonitorError> {
                 if !(delta > 0.0 && h > 0.0) {
@@ -449,9 +486,12 @@ impl ThrottleMonitor {
             p0,
             tps_ukf_init: tps_ukf.clone(),
             both_ukf_init: both_ukf.clone(),
+            watt_ukf_init: watt_ukf.clone(),
             tps_ukf,
             both_ukf,
+            watt_ukf,
             reacquire: Reacquire::new(50.0, 2.0, 50)?,
+            watt_reacquire: Reacquire::new(50.0, 2.0, 50)?,
             u_slow: 0.0,
             u_alpha: (cfg.period_s / 0.033).min(1.0),
             nis_ring: Ring::new(cfg.tps_nis_window),
@@ -466,6 +506,11 @@ impl ThrottleMonitor {
                 cfg.watt_cusum_min_bias_sigma,
                 cfg.watt_cusum_threshold,
             )?,
+            cusum_watt_only: cusum(
+                "watt_only_cusum_threshold",
+                cfg.watt_cusum_min_bias_sigma,
+                cfg.watt_only_cusum_threshold,
+            )?,
             tps_hist: Ring::new(motion),
             eq_hist: Ring::new(motion),
             rail_persist: ((cfg.rail_persist_s / cfg.period_s).round() as u32).max(1),
@@ -475,13 +520,15 @@ impl ThrottleMonitor {
             frozen_run: 0,
             last_tps: f64::NAN,
             first_fail_s: None,
-            fired: [false; 4],
+            fired: [false; 5],
             step_test: StepTest::new(StepTestConfig {
                 sigma: cfg.tps_step_sigma,
                 floor_v: cfg.tps_step_floor_v,
                 motion_scale: cfg.tps_step_motion_scale,
             }),
             watt_alarms: 0,
+            watt_only_hits: Ring::new(cfg.watt_confirm_alarms as usize),
+            watt_only_alarms: 0,
             first_result: TestResult::NOT_TESTED,
             tps_fault: None,
             watt_fault: None,
@@ -490,6 +537,7 @@ impl ThrottleMonitor {
             heal_steps: ((cfg.heal_s / cfg.period_s).round() as u32).max(1),
             last_theta_pred: f64::NAN,
             last_predicted_w: f64::NAN,
+            last_predicted_wo: f64::NAN,
             tps_noise,
             watt_noise,
             noise_steps: 0,
@@ -544,6 +592,7 @@ impl ThrottleMonitor {
     fn restart(&mut self) {
         self.tps_ukf = self.tps_ukf_init.clone();
         self.both_ukf = self.both_ukf_init.clone();
+        self.watt_ukf = self.watt_ukf_init.clone();
         self.first_result = TestResult::NOT_TESTED;
         self.tps_fault = None;
         self.watt_fault = None;
@@ -554,6 +603,7 @@ impl ThrottleMonitor {
         self.tps_noise.reset();
         self.last_theta_pred = f64::NAN;
         self.last_predicted_w = f64::NAN;
+        self.last_predicted_wo = f64::NAN;
         self.watt_noise.reset();
         self.noise_steps = 0;
         self.end_episode();
@@ -561,6 +611,7 @@ impl ThrottleMonitor {
         self.nis_sum = 0.0;
         self.step_test.reset();
         self.dropouts.clear();
+        self.watt_only_hits.clear();
         self.rail_low_run = 0;
         self.rail_high_run = 0;
     }
@@ -601,6 +652,9 @@ impl ThrottleMonitor {
         let _ = self
             .both_ukf
             .set_measurement_noise(Matrix2::new(rt, 0.0, 0.0, rw));
+        let rw_only =
+            self.cfg.fallback_r_scale * self.watt_noise.variance() + self.cfg.wattmeter_r_floor;
+        let _ = self.watt_ukf.set_measurement_noise(Matrix1::new(rw_only));
     }
 
     /// The estimated noise levels (standard deviations): TPS (V) and wattmeter (W, without the
@@ -632,9 +686,26 @@ impl ThrottleMonitor {
         static_tps && driven
     }
 
+    /// The TPS disagrees with the wattmeter-only filter's angle by more than
+    /// `heal_agreement_deg` plus two of that filter's standard deviations.
+    fn tps_disagrees_with_wattmeter(&self) -> bool {
+        let x = self.watt_ukf.state();
+        let sigma =
+            self.watt_ukf.covariance()[(0, 0)].max(0.0).sqrt() / self.model.params().angle_scale;
+        self.tps_hist.last().is_some_and(|tps| {
+            (tps - self.model.angle_deg(x)).abs() > self.cfg.heal_agreement_deg + 2.0 * sigma
+        })
+    }
+
     /// Names the fault behind the residual tests that fired in this episode, among the
-    /// components not already failed; `None` when none of them explains it.
-    fn classify(&self) -> Option<ThrottleFault> {
+    /// components not already failed; `None` when none of them explains it (yet).
+    ///
+    /// The combined filter's wattmeter test fires for a wattmeter fault and for a TPS drift
+    /// (the filter follows the TPS, and the current it predicts for that angle moves); the
+    /// wattmeter-only filter's test fires for the first alone. So a wattmeter fault needs
+    /// both, and a confirmed combined alarm with a quiet wattmeter-only test and a TPS away
+    /// from the wattmeter's angle is the TPS's.
+    fn classify(&self, now_s: f64, elapsed_s: f64) -> Option<ThrottleFault> {
         let tps_testable = self.tps_fault.is_none();
         if tps_testable && self.frozen_run >= self.cfg.frozen_samples {
             return Some(ThrottleFault::TpsStuck);
@@ -643,8 +714,34 @@ impl ThrottleMonitor {
         // a moment of it during another test's episode is a plate at rest that the static map
         // of a plate a percent off Table I puts elsewhere.
         let tps_fired = self.fired[0] || self.fired[1] || self.fired[3];
-        if self.fired[2] && !tps_fired && self.watt_fault.is_none() {
-            return Some(ThrottleFault::Wattmeter);
+        let watt_only = self.watt_only_hits.last().is_some_and(|t| {
+            self.first_fail_s
+                .is_some_and(|t0| t >= t0 - self.cfg.watt_confirm_s)
+        });
+        if self.watt_fault.is_none() && !tps_fired {
+            if !tps_testable || self.plate_fault.is_some() {
+                // The combined filter has no TPS: the wattmeter-only test alone, which model
+                // error fails in bursts. A fault keeps it alarming: still confirmed after twice
+                // `watt_confirm_s`, with an alarm in the last half of it.
+                let recent = self
+                    .watt_only_hits
+                    .last()
+                    .is_some_and(|t| now_s - t <= 0.5 * self.cfg.watt_confirm_s);
+                if elapsed_s >= 2.0 * self.cfg.watt_confirm_s
+                    && self.watt_only_alarms >= self.cfg.watt_confirm_alarms
+                    && recent
+                {
+                    return Some(ThrottleFault::Wattmeter);
+                }
+            } else if self.fired[2] && self.watt_alarms >= self.cfg.watt_confirm_alarms {
+                if watt_only {
+                    return Some(ThrottleFault::Wattmeter);
+                }
+                if self.tps_disagrees_with_wattmeter() {
+                    return Some(ThrottleFault::TpsPerformance);
+                }
+            }
+            return None;
         }
         if tps_fired && tps_testable && self.plate_fault.is_none() {
             return Some(ThrottleFault::TpsPerformance);
@@ -655,8 +752,9 @@ impl ThrottleMonitor {
     /// Closes the residual episode.
     fn end_episode(&mut self) {
         self.first_fail_s = None;
-        self.fired = [false; 4];
+        self.fired = [false; 5];
         self.watt_alarms = 0;
+        self.watt_only_alarms = 0;
     }
 
     /// Sets the component of `fault` failed, and restarts the tests that will see it heal.
@@ -700,7 +798,7 @@ impl ThrottleMonitor {
     }
 
     /// The decision of one step: new faults, then healing.
-    fn decide(&mut self, now_s: f64, tps: Option<f64>, results: &[TestResult; 4]) {
+    fn decide(&mut self, now_s: f64, tps: Option<f64>, results: &[TestResult; 5]) {
         let rail = |run: u32, persist: u32, period_s: f64| TestResult {
             value: f64::from(run) * period_s,
             min: 0.0,
@@ -791,11 +889,20 @@ impl ThrottleMonitor {
             tps_testable,
             tps_testable && self.watt_fault.is_none(),
             tps_testable,
+            self.watt_fault.is_none() && self.plate_fault.is_none(),
         ];
         for (i, r) in results.iter().enumerate() {
+            // The wattmeter-only test opens an episode only where the combined filter has no
+            // TPS: beside a trusted TPS it is the check of the combined test's verdict.
+            let opens = i != 4 || !tps_testable;
             if eligible[i] && r.verdict == Verdict::Failed {
-                self.fired[i] = true;
-                if self.first_fail_s.is_none() {
+                if i == 4 {
+                    self.watt_only_hits.push(now_s);
+                    self.watt_only_alarms += 1;
+                } else {
+                    self.fired[i] = true;
+                }
+                if opens && self.first_fail_s.is_none() {
                     self.first_fail_s = Some(now_s);
                     self.first_result = *r;
                 }
@@ -811,22 +918,22 @@ impl ThrottleMonitor {
             let plate_pending = self.static_run > 0
                 && elapsed < self.cfg.decision_window_s + self.cfg.plate_persist_s;
             if elapsed >= self.cfg.decision_window_s && !plate_pending {
-                match self.classify() {
-                    // A wattmeter fault is persistent: its CUSUM (which restarts after each
-                    // alarm) must alarm `watt_confirm_alarms` times within `watt_confirm_s`;
-                    // a burst of model error alarms once. Meanwhile the TPS tests may fire
-                    // and name the TPS instead (a drifting TPS pulls the current estimate).
-                    Some(ThrottleFault::Wattmeter)
-                        if self.watt_alarms < self.cfg.watt_confirm_alarms =>
-                    {
-                        if elapsed >= self.cfg.watt_confirm_s {
-                            self.end_episode();
-                        }
-                    }
+                let tps_fired = self.fired[0] || self.fired[1] || self.fired[3];
+                let wait_s = if tps_testable {
+                    self.cfg.watt_confirm_s
+                } else {
+                    2.0 * self.cfg.watt_confirm_s
+                };
+                match self.classify(now_s, elapsed) {
                     Some(f) => {
                         self.set_failed(f, self.first_result, now_s);
                         self.end_episode();
                     }
+                    // Only the wattmeter tests fired: a wattmeter fault (or a TPS drift that
+                    // pulls the combined filter) keeps them alarming, and its verdict waits up
+                    // to `watt_confirm_s` for the alarms that tell them apart; meanwhile the
+                    // TPS tests may fire and name the TPS. A burst of model error alarms once.
+                    None if !tps_fired && elapsed < wait_s => {}
                     None => self.end_episode(),
                 }
             }
@@ -836,9 +943,16 @@ impl ThrottleMonitor {
         let quiet = |r: &TestResult| matches!(r.verdict, Verdict::Passed | Verdict::PrePassed);
         if let Some(d) = self.tps_fault {
             let ok = match d.fault {
-                ThrottleFault::TpsOpen | ThrottleFault::TpsShort => {
-                    tps.is_some() && self.rail_low_run == 0 && self.rail_high_run == 0
-                }
+                // A circuit fault heals on readings off the rails, or on rail readings that the
+                // wattmeter estimate does not rule out (the plate at that stop). Without the
+                // wattmeter the model alone cannot tell a plate at its stop from a line still
+                // open.
+                ThrottleFault::TpsOpen | ThrottleFault::TpsShort => tps.is_some_and(|v| {
+                    (v > self.cfg.rail_low_v && v < self.cfg.rail_high_v)
+                        || (self.watt_fault.is_none()
+                            && self.rail_low_run == 0
+                            && self.rail_high_run == 0)
+                }),
                 ThrottleFault::TpsIntermittent => {
                     tps.is_some()
                         && self.rail_low_run == 0
@@ -877,12 +991,10 @@ impl ThrottleMonitor {
                     .reset(*self.tps_ukf.state(), *self.tps_ukf.covariance());
             }
         }
-        if self.watt_fault.is_some() && tps_testable {
-            self.heal_run[1] = if quiet(&results[2]) {
-                self.heal_run[1] + 1
-            } else {
-                0
-            };
+        if self.watt_fault.is_some() && self.plate_fault.is_none() {
+            // Both wattmeter tests pass beside a trusted TPS; the wattmeter-only one without.
+            let ok = quiet(&results[4]) && (!tps_testable || quiet(&results[2]));
+            self.heal_run[1] = if ok { self.heal_run[1] + 1 } else { 0 };
             if self.heal_run[1] >= self.heal_steps {
                 self.watt_fault = None;
             }
@@ -895,6 +1007,41 @@ impl ThrottleMonitor {
                 self.plate_fault = None;
             }
         }
+    }
+}
+
+/// A normalized wattmeter innovation `z` (standard deviation `sigma`, W) with a lag of up to
+/// `lag_s` allowed for: `(lag_s * rate)^2` added to its variance, the rate from the predicted
+/// reading (W) and the previous one in `last` (updated; NaN when there is no innovation).
+fn with_lag(
+    z: f64,
+    sigma: f64,
+    predicted: f64,
+    last: &mut f64,
+    lag_s: f64,
+    period_s: f64,
+) -> (f64, f64) {
+    if !(z.is_finite() && sigma.is_finite()) {
+        *last = f64::NAN;
+        return (z, sigma);
+    }
+    let rate = (predicted - *last) / period_s;
+    *last = predicted;
+    if !rate.is_finite() {
+        return (z, sigma);
+    }
+    let s_eff = (sigma * sigma + (lag_s * rate).powi(2)).sqrt();
+    (z * sigma / s_eff, s_eff)
+}
+
+/// `z` less a dead band of `band` (W) in units of `sigma` (W): residuals within it are no
+/// evidence of a fault. NaN when `z` is.
+fn dead_band(z: f64, sigma: f64, band: f64) -> f64 {
+    let b = band / sigma;
+    if z.is_finite() && b >= 0.0 {
+        z - z.clamp(-b, b)
+    } else {
+        f64::NAN
     }
 }
 
@@ -1084,20 +1231,41 @@ impl Monitor for ThrottleMonitor {
             }
         }
 
+        // The wattmeter-only filter: its innovation, with the same allowances as the combined
+        // filter's below.
+        let mut z_wo = f64::NAN;
+        let mut sigma_wo = f64::NAN;
+        let mut predicted_wo = 0.0;
+        if let Some(w) = watt {
+            if let Ok(inn) = self.watt_ukf.update(&Vector1::new(w), &uu) {
+                z_wo = inn.normalized(0);
+                sigma_wo = inn.covariance[(0, 0)].sqrt();
+                predicted_wo = w - inn.residual[0];
+                if self.watt_reacquire.observe(inn.nis, inn.dof) {
+                    let _reset_ok = self.watt_ukf.reset(eq, self.p0).is_ok();
+                }
+            }
+        }
         // A wattmeter lagging the current by up to `watt_lag_tolerance_s` misses the predicted
         // reading by up to that times its rate: allowed for on top of the innovation variance.
-        if z_w.is_finite() && sigma_w.is_finite() {
-            let rate_w = (predicted_w - self.last_predicted_w) / self.cfg.period_s;
-            if rate_w.is_finite() {
-                let s_eff =
-                    (sigma_w * sigma_w + (self.cfg.watt_lag_tolerance_s * rate_w).powi(2)).sqrt();
-                z_w *= sigma_w / s_eff;
-                sigma_w = s_eff;
-            }
-            self.last_predicted_w = predicted_w;
-        } else {
-            self.last_predicted_w = f64::NAN;
-        }
+        let lag_s = self.cfg.watt_lag_tolerance_s;
+        let p = self.cfg.period_s;
+        (z_wo, sigma_wo) = with_lag(
+            z_wo,
+            sigma_wo,
+            predicted_wo,
+            &mut self.last_predicted_wo,
+            lag_s,
+            p,
+        );
+        (z_w, sigma_w) = with_lag(
+            z_w,
+            sigma_w,
+            predicted_w,
+            &mut self.last_predicted_w,
+            lag_s,
+            p,
+        );
         if !watt_fed {
             self.watt_noise.gap();
         }
@@ -1106,6 +1274,7 @@ impl Monitor for ThrottleMonitor {
         // a noisier wattmeter would fail it at once.
         if !self.watt_noise.settled() {
             z_w = f64::NAN;
+            z_wo = f64::NAN;
         }
 
         // Residual tests.
@@ -1138,16 +1307,19 @@ impl Monitor for ThrottleMonitor {
         let cusum_tps = self.cusum_tps.step(z_t.clamp(-clip, clip), z_t.is_finite());
         // Residuals within the model-error allowance are no evidence of a wattmeter fault (a dead
         // band in innovation units: wide when the wattmeter is quiet, narrow when it is noisy).
-        let band = (self.cfg.watt_model_error_w + self.cfg.watt_gain_tolerance * predicted_w.abs())
-            / sigma_w;
-        let z_w = if z_w.is_finite() && band >= 0.0 {
-            z_w - z_w.clamp(-band, band)
-        } else {
-            f64::NAN
-        };
+        let (model_error, gain) = (self.cfg.watt_model_error_w, self.cfg.watt_gain_tolerance);
+        let z_w = dead_band(z_w, sigma_w, model_error + gain * predicted_w.abs());
         let cusum_watt = self
             .cusum_watt
             .step(z_w.clamp(-clip, clip), z_w.is_finite());
+        let z_wo = dead_band(z_wo, sigma_wo, model_error + gain * predicted_wo.abs());
+        let cusum_watt_only = self
+            .cusum_watt_only
+            .step(z_wo.clamp(-clip, clip), z_wo.is_finite());
+        out(Output::Test {
+            test: "wattmeter_only_cusum",
+            result: cusum_watt_only,
+        });
         out(Output::Test {
             test: "tps_nis_window",
             result: nis_result,
@@ -1178,7 +1350,13 @@ impl Monitor for ThrottleMonitor {
             test: "tps_step",
             result: step_result,
         });
-        let results = [nis_result, cusum_tps, cusum_watt, step_result];
+        let results = [
+            nis_result,
+            cusum_tps,
+            cusum_watt,
+            step_result,
+            cusum_watt_only,
+        ];
         self.decide(now_s, tps, &results);
 
         // Events: a failed component's event fails with the result that qualified it; the
@@ -1212,7 +1390,7 @@ impl Monitor for ThrottleMonitor {
         };
         results7[ThrottleFault::Wattmeter.event()] = match self.watt_fault {
             Some(d) => d.result,
-            None => pass(!pending && self.tps_fault.is_none() && self.plate_fault.is_none()),
+            None => pass(!pending && self.plate_fault.is_none()),
         };
         results7[SWITCH_EVENT] = match self.tps_fault {
             Some(d) => d.result,
@@ -1261,6 +1439,7 @@ impl Monitor for ThrottleMonitor {
 
         let _ = self.tps_ukf.predict(&uu);
         let _ = self.both_ukf.predict(&uu);
+        let _ = self.watt_ukf.predict(&uu);
     }
 
     fn start_operation_cycle(&mut self, now_ns: u64, out: &mut OutputSink<'_>) {
