@@ -311,7 +311,9 @@ bias_deg = 8.0
     assert!(r.raised.iter().all(|(t, _)| *t >= 20.0), "{:?}", r.raised);
     let watt = r.first_raised("P1651").expect("wattmeter DTC");
     assert!((20.0..22.0).contains(&watt), "P1651 at {watt}");
-    let tps = r.first_raised("P0121").expect("TPS DTC after the wattmeter's");
+    let tps = r
+        .first_raised("P0121")
+        .expect("TPS DTC after the wattmeter's");
     assert!((35.0..36.0).contains(&tps), "P0121 at {tps}");
     let switch = r.first_raised("P2106").expect("switch");
     assert!((switch - tps).abs() < 0.002, "switch {switch}, TPS {tps}");
@@ -395,7 +397,9 @@ offset_w = 0.3
     assert!(r.raised.iter().all(|(t, _)| *t >= 20.0), "{:?}", r.raised);
     let open = r.first_raised("P0122").expect("TPS open DTC");
     assert!((20.0..20.1).contains(&open), "P0122 at {open}");
-    let watt = r.first_raised("P1651").expect("wattmeter DTC after the TPS's");
+    let watt = r
+        .first_raised("P1651")
+        .expect("wattmeter DTC after the TPS's");
     assert!((35.0..41.0).contains(&watt), "P1651 at {watt}");
     assert!(
         r.cleared.iter().all(|(_, d, _)| d != "P0122-16"),
