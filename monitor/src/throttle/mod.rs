@@ -50,6 +50,7 @@
 //! switches the output (the TPS stays the source).
 
 pub mod config;
+mod span_window;
 pub mod step_test;
 
 use fdd_diagnostics::detectors::{two_sided_arl, Cusum, CusumConfig};
@@ -62,6 +63,7 @@ use fdd_estimators::{NoiseLevel, SigmaPoints, Ukf};
 use nalgebra::{Matrix1, Matrix2, Matrix3, Vector1, Vector2, Vector3};
 
 pub use config::ThrottleMonitorConfig;
+use span_window::SpanWindow;
 use step_test::{StepTest, StepTestConfig};
 
 use crate::monitor::{Monitor, Output, OutputSink};
@@ -260,8 +262,8 @@ pub struct ThrottleMonitor {
     cusum_tps: Cusum,
     cusum_watt: Cusum,
     cusum_watt_only: Cusum,
-    tps_hist: Ring,
-    eq_hist: Ring,
+    tps_hist: SpanWindow,
+    eq_hist: SpanWindow,
     rail_persist: u32,
     rail_low_run: u32,
     rail_high_run: u32,
@@ -511,8 +513,8 @@ impl ThrottleMonitor {
                 cfg.watt_cusum_min_bias_sigma,
                 cfg.watt_only_cusum_threshold,
             )?,
-            tps_hist: Ring::new(motion),
-            eq_hist: Ring::new(motion),
+            tps_hist: SpanWindow::new(motion),
+            eq_hist: SpanWindow::new(motion),
             rail_persist: ((cfg.rail_persist_s / cfg.period_s).round() as u32).max(1),
             rail_low_run: 0,
             rail_high_run: 0,
@@ -1003,7 +1005,7 @@ impl ThrottleMonitor {
             let moving =
                 self.tps_hist.full() && self.tps_hist.span() >= self.cfg.static_tps_range_deg;
             self.heal_run[2] = if moving { self.heal_run[2] + 1 } else { 0 };
-            if self.heal_run[2] >= self.heal_steps.min(self.tps_hist.cap as u32) {
+            if self.heal_run[2] >= self.heal_steps.min(self.tps_hist.cap() as u32) {
                 self.plate_fault = None;
             }
         }
