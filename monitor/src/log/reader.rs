@@ -1058,10 +1058,12 @@ impl LogReader {
                 if self.zstd.is_none() {
                     self.zstd = zstd::bulk::Decompressor::new().ok();
                 }
-                self.zstd
-                    .as_mut()
-                    .and_then(|z| z.decompress_to_buffer(records, &mut batch.arena).ok())
-                    == Some(uncompressed_size)
+                !zstd_window_too_large(records)
+                    && self
+                        .zstd
+                        .as_mut()
+                        .and_then(|z| z.decompress_to_buffer(records, &mut batch.arena).ok())
+                        == Some(uncompressed_size)
             }
             _ => false,
         };
@@ -1483,6 +1485,24 @@ impl Iterator for LogReader {
 
     fn next(&mut self) -> Option<Self::Item> {
         self.next_message().map(|r| r.map(|m| m.to_owned_message()))
+    }
+}
+
+/// The streaming decoder the mcap crate uses refuses a zstd frame whose window exceeds its
+/// default limit, 2^27 + 1 bytes ("Frame requires too much memory for decoding"); one-shot
+/// decompression into a buffer of the known size does not look at the window. The direct path
+/// refuses such a frame too (its header's window descriptor, RFC 8878 3.1.1.1.2), so that both
+/// paths read a damaged chunk alike.
+fn zstd_window_too_large(frame: &[u8]) -> bool {
+    const MAGIC: [u8; 4] = [0x28, 0xb5, 0x2f, 0xfd];
+    const MAX_WINDOW: u64 = (1 << 27) + 1;
+    match frame {
+        [m0, m1, m2, m3, fhd, wd, ..] if [*m0, *m1, *m2, *m3] == MAGIC && fhd & 0x20 == 0 => {
+            let log = 10 + u64::from(wd >> 3);
+            let base = 1u64 << log;
+            base + (base / 8) * u64::from(wd & 7) > MAX_WINDOW
+        }
+        _ => false,
     }
 }
 
