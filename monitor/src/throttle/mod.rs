@@ -272,13 +272,13 @@ pub struct ThrottleMonitor {
     last_tps: f64,
     first_fail_s: Option<f64>,
     /// Residual tests that failed in this episode: TPS NIS window, TPS CUSUM, wattmeter
-    /// CUSUM, TPS step, wattmeter-only CUSUM.
-    fired: [bool; 5],
+    /// CUSUM, TPS step (the wattmeter-only test's alarms are kept below).
+    fired: [bool; 4],
     step_test: StepTest,
     /// Wattmeter test alarms in the current episode.
     watt_alarms: u32,
-    /// Times of the latest wattmeter-only test alarms (s), and their count in the episode.
-    watt_only_hits: Ring,
+    /// Time of the latest wattmeter-only test alarm (s), and their count in the episode.
+    last_watt_only_s: Option<f64>,
     watt_only_alarms: u32,
     /// The first failing residual test's result, kept through the decision window.
     first_result: TestResult,
@@ -367,11 +367,8 @@ impl ThrottleMonitor {
                 return Err(setting(key, format!("{v} must be a non-negative number")));
             }
         }
-        if cfg.watt_confirm_alarms == 0 || cfg.watt_confirm_alarms as usize > RING {
-            return Err(setting(
-                "watt_confirm_alarms",
-                format!("must be 1..={RING}"),
-            ));
+        if cfg.watt_confirm_alarms == 0 {
+            return Err(setting("watt_confirm_alarms", "must be at least 1"));
         }
         if !(cfg.rail_low_v < cfg.rail_high_v) {
             return Err(setting("rail_low_v", "must be below rail_high_v"));
@@ -522,14 +519,14 @@ impl ThrottleMonitor {
             frozen_run: 0,
             last_tps: f64::NAN,
             first_fail_s: None,
-            fired: [false; 5],
+            fired: [false; 4],
             step_test: StepTest::new(StepTestConfig {
                 sigma: cfg.tps_step_sigma,
                 floor_v: cfg.tps_step_floor_v,
                 motion_scale: cfg.tps_step_motion_scale,
             }),
             watt_alarms: 0,
-            watt_only_hits: Ring::new(cfg.watt_confirm_alarms as usize),
+            last_watt_only_s: None,
             watt_only_alarms: 0,
             first_result: TestResult::NOT_TESTED,
             tps_fault: None,
@@ -613,7 +610,7 @@ impl ThrottleMonitor {
         self.nis_sum = 0.0;
         self.step_test.reset();
         self.dropouts.clear();
-        self.watt_only_hits.clear();
+        self.last_watt_only_s = None;
         self.rail_low_run = 0;
         self.rail_high_run = 0;
     }
@@ -716,7 +713,7 @@ impl ThrottleMonitor {
         // a moment of it during another test's episode is a plate at rest that the static map
         // of a plate a percent off Table I puts elsewhere.
         let tps_fired = self.fired[0] || self.fired[1] || self.fired[3];
-        let watt_only = self.watt_only_hits.last().is_some_and(|t| {
+        let watt_only = self.last_watt_only_s.is_some_and(|t| {
             self.first_fail_s
                 .is_some_and(|t0| t >= t0 - self.cfg.watt_confirm_s)
         });
@@ -726,8 +723,7 @@ impl ThrottleMonitor {
                 // error fails in bursts. A fault keeps it alarming: still confirmed after twice
                 // `watt_confirm_s`, with an alarm in the last half of it.
                 let recent = self
-                    .watt_only_hits
-                    .last()
+                    .last_watt_only_s
                     .is_some_and(|t| now_s - t <= 0.5 * self.cfg.watt_confirm_s);
                 if elapsed_s >= 2.0 * self.cfg.watt_confirm_s
                     && self.watt_only_alarms >= self.cfg.watt_confirm_alarms
@@ -754,7 +750,7 @@ impl ThrottleMonitor {
     /// Closes the residual episode.
     fn end_episode(&mut self) {
         self.first_fail_s = None;
-        self.fired = [false; 5];
+        self.fired = [false; 4];
         self.watt_alarms = 0;
         self.watt_only_alarms = 0;
     }
@@ -899,7 +895,7 @@ impl ThrottleMonitor {
             let opens = i != 4 || !tps_testable;
             if eligible[i] && r.verdict == Verdict::Failed {
                 if i == 4 {
-                    self.watt_only_hits.push(now_s);
+                    self.last_watt_only_s = Some(now_s);
                     self.watt_only_alarms += 1;
                 } else {
                     self.fired[i] = true;
