@@ -67,6 +67,9 @@ struct FaultOutcome {
     any_dtc_s: Option<f64>,
     correct_s: Option<f64>,
     wrong: Vec<String>,
+    /// Whether the first specific DTC raised while the fault acts (and not right for another
+    /// fault acting with it) names it.
+    first_specific: Option<bool>,
     group_missed: bool,
     group: bool,
 }
@@ -114,6 +117,9 @@ fn run_log(path: &Path, cfg: &IntakeConfig) -> LogOutcome {
     let mut trace_line = String::new();
     let mut seen_fault = false;
     let verbose = std::env::var("FDD_VERBOSE").is_ok();
+    // The candidates of the group DTC while it is failed: a fault that becomes observable
+    // meanwhile with its kind among them has a DTC from then on.
+    let mut group_active: Option<Vec<(String, f64)>> = None;
     for f in IntakeSim::from_scenario(&sc).expect("sim") {
         let t_s = f.t_ns as f64 * 1e-9;
         let dt = t_s - last_t;
@@ -139,6 +145,8 @@ fn run_log(path: &Path, cfg: &IntakeConfig) -> LogOutcome {
             maf_kg_s: f.maf_kg_s,
         };
         let mut raised: Vec<Raised> = Vec::new();
+        let mut group_passed = false;
+        let group_passed_ref = &mut group_passed;
         let mut flagged = false;
         let flagged_ref = &mut flagged;
         let max_ratio = &mut o.max_ratio;
@@ -197,6 +205,13 @@ fn run_log(path: &Path, cfg: &IntakeConfig) -> LogOutcome {
             }
             Output::Diagnosis { flagged, .. } => *flagged_ref = flagged,
             Output::Event(ev)
+                if ev.event == GROUP_EVENT
+                    && ev.bit_changed(StatusBit::TestFailed)
+                    && !ev.status_after.test_failed() =>
+            {
+                *group_passed_ref = true;
+            }
+            Output::Event(ev)
                 if ev.bit_changed(StatusBit::TestFailed) && ev.status_after.test_failed() =>
             {
                 raised.push(Raised {
@@ -238,12 +253,25 @@ fn run_log(path: &Path, cfg: &IntakeConfig) -> LogOutcome {
                 r.detail = format!("fits {} | decided {}", fits.join(" "), decided.join("; "));
             }
         }
+        if group_passed {
+            group_active = None;
+        }
         for r in &raised {
+            if r.event == GROUP_EVENT {
+                group_active = Some(r.candidates.clone());
+            }
             for fo in o.faults.iter_mut() {
                 if !r.active.contains(&fo.kind) {
                     continue;
                 }
                 let group = r.event == GROUP_EVENT;
+                if !group
+                    && fo.first_specific.is_none()
+                    && (specific_ok(fo.kind, &r.event)
+                        || !r.active.iter().any(|k| specific_ok(k, &r.event)))
+                {
+                    fo.first_specific = Some(specific_ok(fo.kind, &r.event));
+                }
                 if group {
                     fo.group = true;
                     // The group DTC names the fault if any active fault is a candidate.
@@ -258,6 +286,13 @@ fn run_log(path: &Path, cfg: &IntakeConfig) -> LogOutcome {
                     fo.correct_s.get_or_insert(fo.observable_s);
                 } else if !r.active.iter().any(|k| specific_ok(k, &r.event)) {
                     fo.wrong.push(r.event.clone());
+                }
+            }
+        }
+        if let Some(c) = &group_active {
+            for (slot, fo) in o.faults.iter_mut().enumerate() {
+                if f.fault_observable_in(slot) && group_ok(fo.kind, c) {
+                    fo.any_dtc_s.get_or_insert(fo.observable_s);
                 }
             }
         }
@@ -335,6 +370,7 @@ fn intake_set_report() {
     outcomes.sort_by(|a, b| a.name.cmp(&b.name));
     let mut worst: BTreeMap<&'static str, (f64, String)> = BTreeMap::new();
     let (mut n_faults, mut within2, mut correct, mut groups, mut group_missed) = (0, 0, 0, 0, 0);
+    let (mut specific, mut specific_right) = (0, 0);
     let mut free_h = 0.0;
     let mut false_dtcs = 0;
     let (mut flag_before, mut flag_after) = (0.0, 0.0);
@@ -365,6 +401,8 @@ fn intake_set_report() {
             let ok2 = fo.any_dtc_s.is_some_and(|t| t <= 2.0);
             within2 += usize::from(ok2);
             correct += usize::from(fo.correct_s.is_some());
+            specific += usize::from(fo.first_specific.is_some());
+            specific_right += usize::from(fo.first_specific == Some(true));
             groups += usize::from(fo.group);
             group_missed += usize::from(fo.group_missed);
             line += &format!(
@@ -412,7 +450,9 @@ fn intake_set_report() {
         println!("  {t:32} {r:6.3}  ({log})");
     }
     println!(
-        "\nfault-free time flagged: {flag_before:.1} s before any fault, {flag_after:.1} s after one\n{} logs, {free_h:.2} h fault-free, {false_dtcs} false DTCs; {n_faults} faults: {within2} with a DTC within 2 s observable, {correct} correct specific, {groups} with a group DTC ({group_missed} lacking the truth)",
-        outcomes.len()
+        "\nfault-free time flagged: {flag_before:.1} s before any fault, {flag_after:.1} s after one\n{} logs, {free_h:.2} h fault-free, {false_dtcs} false DTCs; {n_faults} faults: {within2} with a DTC within 2 s observable ({:.1} %), {correct} with a correct specific DTC; first specific DTC right for {specific_right} of {specific} ({:.1} %); {groups} with a group DTC ({group_missed} lacking the truth)",
+        outcomes.len(),
+        100.0 * within2 as f64 / n_faults.max(1) as f64,
+        100.0 * specific_right as f64 / specific.max(1) as f64,
     );
 }
