@@ -158,6 +158,22 @@ fn evaluate_scores_logs_and_scenarios_against_their_truth() {
         assert_eq!(c["wrong_dtc"], 0, "{name}: {c}");
     }
     assert_eq!(class("tps_bias")["episodes"], 0);
+    // The TPS-open log switched the position output to the wattmeter estimate at its DTC
+    // (10.02 s) and reports the error from then on; the wattmeter fault switches nothing.
+    let switched = &v["logs"][0]["after_switch"];
+    assert_eq!(switched.as_array().map(Vec::len), Some(1), "{switched}");
+    assert_eq!(switched[0]["estimate"], "throttle_angle");
+    let at = switched[0]["switched_at_s"].as_f64().expect("time");
+    assert!((10.0..10.1).contains(&at), "switched at {at}");
+    let std = switched[0]["std"].as_f64().expect("std");
+    assert!(
+        std > 0.5 && std < 7.0,
+        "error std after the switch {std} deg"
+    );
+    assert_eq!(
+        v["logs"][1]["after_switch"].as_array().map(Vec::len),
+        Some(0)
+    );
 
     // The tables name the figures; a file that is neither a log nor a scenario is refused.
     let out = fdd()
@@ -167,6 +183,10 @@ fn evaluate_scores_logs_and_scenarios_against_their_truth() {
         .expect("run");
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("TDR") && text.contains("tps_open"), "{text}");
+    assert!(
+        text.contains("throttle_angle after its source switched: 1 logs"),
+        "{text}"
+    );
     let out = fdd()
         .arg("evaluate")
         .arg(root().join("README.md"))

@@ -370,6 +370,7 @@ fn intake_set_report() {
     outcomes.sort_by(|a, b| a.name.cmp(&b.name));
     let mut worst: BTreeMap<&'static str, (f64, String)> = BTreeMap::new();
     let (mut n_faults, mut within2, mut correct, mut groups, mut group_missed) = (0, 0, 0, 0, 0);
+    let mut never_observable = 0usize;
     let (mut specific, mut specific_right) = (0, 0);
     let mut free_h = 0.0;
     let mut false_dtcs = 0;
@@ -397,6 +398,13 @@ fn intake_set_report() {
             .collect();
         let mut line = format!("{:40} ", o.name);
         for fo in &o.faults {
+            if fo.observable_s <= 0.0 {
+                // Never observable (a leak near wide-open throttle throughout): nothing to
+                // detect, as `fdd evaluate` counts it.
+                never_observable += 1;
+                line += &format!("{} never observable | ", fo.kind);
+                continue;
+            }
             n_faults += 1;
             let ok2 = fo.any_dtc_s.is_some_and(|t| t <= 2.0);
             within2 += usize::from(ok2);
@@ -450,7 +458,7 @@ fn intake_set_report() {
         println!("  {t:32} {r:6.3}  ({log})");
     }
     println!(
-        "\nfault-free time flagged: {flag_before:.1} s before any fault, {flag_after:.1} s after one\n{} logs, {free_h:.2} h fault-free, {false_dtcs} false DTCs; {n_faults} faults: {within2} with a DTC within 2 s observable ({:.1} %), {correct} with a correct specific DTC; first specific DTC right for {specific_right} of {specific} ({:.1} %); {groups} with a group DTC ({group_missed} lacking the truth)",
+        "\nfault-free time flagged: {flag_before:.1} s before any fault, {flag_after:.1} s after one\n{} logs, {free_h:.2} h fault-free, {false_dtcs} false DTCs; {n_faults} observable faults ({never_observable} never observable): {within2} with a DTC within 2 s observable ({:.1} %), {correct} with a correct specific DTC; first specific DTC right for {specific_right} of {specific} ({:.1} %); {groups} with a group DTC ({group_missed} lacking the truth)",
         outcomes.len(),
         100.0 * within2 as f64 / n_faults.max(1) as f64,
         100.0 * specific_right as f64 / specific.max(1) as f64,

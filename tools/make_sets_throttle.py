@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Writes the throttle scenario sets: fixtures/sets/throttle_tuning/ and throttle_heldout/.
 
-Deterministic (fixed seeds): running it again rewrites the same files. The two sets differ in
+Deterministic (fixed seeds): running it again rewrites the same files (`--check` compares
+and writes nothing). The two sets differ in
 everything a new vehicle would change (fixtures/sets/README.md says how):
 
 - tuning: seeds 1000+, excitation pulse_train / chirp / pedal_ramps, wattmeter noise 0.05 to
@@ -20,6 +21,7 @@ Usage: python3 tools/make_sets_throttle.py   (from the repository root)
 import os
 import random
 import shutil
+import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SETS = os.path.join(ROOT, "fixtures", "sets")
@@ -95,6 +97,28 @@ def scenario(name, seed, duration_s, excitation, sensors, plant, fault, second=N
     if second:
         text += "\n" + table("second_fault", second)
     return text
+
+
+def check_set(dirname, items):
+    """Number of files of the set that differ from what would be written (or are extra)."""
+    d = os.path.join(SETS, dirname)
+    want = {name + ".toml": text for name, text in items}
+    bad = 0
+    have = set(os.listdir(d)) if os.path.isdir(d) else set()
+    for f in sorted(have - set(want)):
+        if f.endswith(".toml"):
+            print("extra: %s" % os.path.join(dirname, f))
+            bad += 1
+    for f, text in sorted(want.items()):
+        try:
+            with open(os.path.join(d, f), encoding="utf-8") as fh:
+                same = fh.read() == text
+        except OSError:
+            same = False
+        if not same:
+            print("differs: %s" % os.path.join(dirname, f))
+            bad += 1
+    return bad
 
 
 def write_set(dirname, items):
@@ -327,6 +351,13 @@ if __name__ == "__main__":
     t = tuning()
     h = heldout()
     ct, ch = calibration()
+    if sys.argv[1:] == ["--check"]:
+        # Compare only: exit 1 if a committed file differs from what would be written.
+        bad = sum(check_set(d, items) for d, items in [
+            ("throttle_tuning", t), ("throttle_heldout", h),
+            ("throttle_calibrate_train", ct), ("throttle_calibrate_heldout", ch)])
+        print("%d throttle scenario files differ" % bad)
+        sys.exit(1 if bad else 0)
     write_set("throttle_tuning", t)
     write_set("throttle_heldout", h)
     write_set("throttle_calibrate_train", ct)

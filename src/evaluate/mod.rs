@@ -65,6 +65,23 @@ pub struct LogResult {
     pub duration_s: f64,
     /// DTCs raised (testFailed 0 -> 1), as `DTC event @ time_s`.
     pub dtcs: Vec<String>,
+    /// Per estimate whose source changed in this log (the throttle position switched from the
+    /// TPS to the wattmeter estimate), its error against the truth from the switch on.
+    pub after_switch: Vec<SwitchError>,
+}
+
+/// An estimate's error against the truth after its source first changed in a log.
+#[derive(Debug, Clone, Serialize)]
+pub struct SwitchError {
+    /// The estimate (`throttle_angle`).
+    pub estimate: String,
+    /// Log time of the switch (s).
+    pub switched_at_s: f64,
+    /// Estimates compared after the switch, their mean error and standard deviation (the
+    /// estimate's unit: deg for the throttle position).
+    pub samples: u64,
+    pub mean: f64,
+    pub std: f64,
 }
 
 /// Everything `fdd evaluate` prints.
@@ -166,6 +183,21 @@ pub fn evaluate(
                 .filter_map(|d| {
                     d.first_failed_s
                         .map(|t| format!("{} {} @ {t:.3}", d.dtc, d.event))
+                })
+                .collect(),
+            after_switch: summary
+                .truth
+                .iter()
+                .flat_map(|t| &t.estimates)
+                .filter_map(|e| {
+                    let (at, err) = (e.switched_at_ns?, e.error_after_switch?);
+                    (err.samples > 0).then(|| SwitchError {
+                        estimate: e.estimate.clone(),
+                        switched_at_s: at as f64 * 1e-9,
+                        samples: err.samples,
+                        mean: err.mean,
+                        std: err.std,
+                    })
                 })
                 .collect(),
         });
@@ -275,6 +307,7 @@ impl EvaluateSummary {
                 );
             }
         }
+        self.render_switches(&mut s);
         if self.monitors.is_empty() {
             let _ = writeln!(
                 s,
@@ -292,6 +325,42 @@ impl EvaluateSummary {
             "\nTDR: share of faulty samples flagged; FAR: share of fault-free samples flagged; FIA: mean score of the true fault over the flagged faulty samples (DX'25). Delays in s from the fault's first observable sample; `group` counts episodes with a group DTC (`n/m!`: m of them lacked the true fault)."
         );
         s
+    }
+}
+
+impl EvaluateSummary {
+    /// Per estimate that switched source in some log: in how many logs, and the median and
+    /// worst standard deviation of its error after the switch (the throttle issue's bound on
+    /// the position error after the switch to the wattmeter estimate is about the worst).
+    fn render_switches(&self, s: &mut String) {
+        let mut names: Vec<&str> = self
+            .logs
+            .iter()
+            .flat_map(|l| l.after_switch.iter().map(|e| e.estimate.as_str()))
+            .collect();
+        names.sort_unstable();
+        names.dedup();
+        for name in names {
+            let mut stds: Vec<(f64, &Path)> = self
+                .logs
+                .iter()
+                .flat_map(|l| {
+                    l.after_switch
+                        .iter()
+                        .filter(|e| e.estimate == name)
+                        .map(|e| (e.std, l.file.as_path()))
+                })
+                .collect();
+            stds.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let median = stds[stds.len() / 2].0;
+            let (worst, file) = stds[stds.len() - 1];
+            let _ = writeln!(
+                s,
+                "\n{name} after its source switched: {} logs, error std median {median:.2}, worst {worst:.2} ({})",
+                stds.len(),
+                file.file_name().map_or_else(|| file.display().to_string(), |f| f.to_string_lossy().into_owned())
+            );
+        }
     }
 }
 
