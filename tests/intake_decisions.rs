@@ -265,6 +265,45 @@ fn two_sensor_faults_at_once_get_two_dtcs() {
     assert_eq!(mon.decisions().flatten().count(), 2);
 }
 
+/// A MAP short circuit after the MAF has been named stuck: the stuck MAF holds the filters'
+/// pressure estimate wherever it stuck, and a MAF stuck in a tip-in would make a shorted MAP
+/// look like wide-open throttle, so with the MAF failed the circuit check judges against the
+/// model's steady state. The MAF sticks at eight times spread over tip-ins and tip-outs; every
+/// run gets the MAF DTC and then P0108 within a second of the short.
+#[test]
+fn a_map_short_is_named_while_the_maf_is_failed() {
+    for k in 0..8 {
+        let stuck_s = 10.0 + 0.45 * f64::from(k);
+        let mut sc = IntakeScenario::new(
+            "maf_stuck_then_map_short",
+            stuck_s + 12.0,
+            11,
+            ProfileSpec::TipInOut(TipInOutSpec::default()),
+            IntakeFault::MafStuck { start_s: stuck_s },
+        );
+        let short_s = stuck_s + 8.0;
+        sc.second_fault = Some(IntakeFault::MapShort { start_s: short_s }.into());
+        let mut mon = monitor();
+        let changes = feed(&mut mon, simulate(&sc));
+        let first = |name: &str| {
+            changes
+                .iter()
+                .find(|c| c.failed && c.event == name)
+                .map(|c| c.t_s)
+        };
+        let maf = first("maf_range_performance");
+        assert!(
+            maf.is_some_and(|t| t < short_s),
+            "stuck at {stuck_s}: {changes:?}"
+        );
+        let map = first("map_circuit_high");
+        assert!(
+            map.is_some_and(|t| t >= short_s && t < short_s + 1.0),
+            "stuck at {stuck_s}, short at {short_s}: {changes:?}"
+        );
+    }
+}
+
 /// Two residual faults one after the other: a MAF gain error from 10 s and a 3 mm leak from
 /// 25 s. The first is named and taken out of the filters' inputs (its reading corrected), so
 /// the residuals go on testing and the leak gets its own DTC, with the MAF's still failed.

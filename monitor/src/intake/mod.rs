@@ -783,6 +783,14 @@ impl IntakeMonitor {
         residual.chain(sensors)
     }
 
+    /// Whether a fault of sensor `j` (0 MAP, 1 MAF) is named and not healed: its
+    /// range/performance (residual, frozen or noisy) or a circuit DTC.
+    fn sensor_named(&self, j: usize) -> bool {
+        self.decisions()
+            .flatten()
+            .any(|d| (3 * j..3 * j + 3).contains(&d.event()))
+    }
+
     /// The hypotheses ranked by their statistic, as of the last segment of the current or last
     /// isolation episode.
     pub fn ranked_hypotheses(&self) -> [Fit; 4] {
@@ -997,8 +1005,13 @@ impl IntakeMonitor {
         // While the estimate still moves (a tip-in or tip-out the filters follow from the
         // other sensor alone), it is given ESTIMATE_SETTLE_SEGMENTS of its last change more.
         let est_prev = self.est_prev;
+        // With the other sensor named failed, the filters' estimate of this one's output leans
+        // on failed readings (a stuck MAF holds the pressure estimate wherever it stuck, and a
+        // shorted MAP then looks like wide-open throttle): the model's steady state for the
+        // inputs judges instead.
+        let other_failed = [self.sensor_named(1), self.sensor_named(0)];
         let ruled_out = |i: usize, limit: f64, above: bool| match &self.filters {
-            Some(f) => {
+            Some(f) if !other_failed[usize::from(i != 1)] => {
                 let sigma = f.central.covariance()[(i, i)].max(0.0).sqrt();
                 let x = f.central.state()[i];
                 let prev = if i == 1 { est_prev[0] } else { est_prev[1] };
@@ -1013,7 +1026,7 @@ impl IntakeMonitor {
                     x + 3.0 * sigma + moving < limit
                 }
             }
-            None => self.model.equilibrium(&u).is_none_or(|x| {
+            _ => self.model.equilibrium(&u).is_none_or(|x| {
                 if above {
                     x[i] > limit
                 } else {
