@@ -267,6 +267,11 @@ pub struct ThrottleMonitor {
     rail_persist: u32,
     rail_low_run: u32,
     rail_high_run: u32,
+    /// A TPS circuit fault healed in this operation cycle on rail readings the estimate could
+    /// not rule out (the plate near that stop): from then on the rail check also asks the
+    /// wattmeter-only filter, since the combined filter that takes the TPS again would follow
+    /// a line still open or shorted to its rail and never rule it out.
+    rail_fault_healed: bool,
     dropouts: Ring,
     frozen_run: u32,
     last_tps: f64,
@@ -515,6 +520,7 @@ impl ThrottleMonitor {
             rail_persist: ((cfg.rail_persist_s / cfg.period_s).round() as u32).max(1),
             rail_low_run: 0,
             rail_high_run: 0,
+            rail_fault_healed: false,
             dropouts: Ring::new(cfg.intermittent_count),
             frozen_run: 0,
             last_tps: f64::NAN,
@@ -613,6 +619,7 @@ impl ThrottleMonitor {
         self.last_watt_only_s = None;
         self.rail_low_run = 0;
         self.rail_high_run = 0;
+        self.rail_fault_healed = false;
     }
 
     /// Puts the noise estimates into the filters' `R` every [`NOISE_UPDATE_STEPS`] steps once
@@ -981,6 +988,9 @@ impl ThrottleMonitor {
             self.heal_run[0] = if ok { self.heal_run[0] + 1 } else { 0 };
             if self.heal_run[0] >= self.heal_steps {
                 tracing::debug!(time_s = now_s, fault = d.fault.name(), "TPS healed");
+                if matches!(d.fault, ThrottleFault::TpsOpen | ThrottleFault::TpsShort) {
+                    self.rail_fault_healed = true;
+                }
                 self.tps_fault = None;
                 self.dropouts.clear();
                 // The combined filter takes the TPS again from the TPS filter's estimate.
@@ -1085,6 +1095,16 @@ impl Monitor for ThrottleMonitor {
                 && theta_p - 3.0 * sigma_p > limits[0] + self.cfg.rail_margin_deg;
             rail_high = v >= self.cfg.rail_high_v
                 && theta_p + 3.0 * sigma_p < limits[1] - self.cfg.rail_margin_deg;
+            if self.rail_fault_healed && self.watt_fault.is_none() {
+                let xw = self.watt_ukf.state();
+                let theta_w = self.model.angle_deg(xw);
+                let sigma_w = self.watt_ukf.covariance()[(0, 0)].max(0.0).sqrt()
+                    / self.model.params().angle_scale;
+                rail_low |= v <= self.cfg.rail_low_v
+                    && theta_w - 3.0 * sigma_w > limits[0] + self.cfg.rail_margin_deg;
+                rail_high |= v >= self.cfg.rail_high_v
+                    && theta_w + 3.0 * sigma_w < limits[1] - self.cfg.rail_margin_deg;
+            }
             // A reading clipped at an ADC end repeats while the plate rests on that stop
             // (a TPS a percent high reads 5 V at the open stop): not a frozen signal.
             let inside = v > self.cfg.rail_low_v && v < self.cfg.rail_high_v;
