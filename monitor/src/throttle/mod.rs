@@ -695,12 +695,17 @@ impl ThrottleMonitor {
     /// The TPS disagrees with the wattmeter-only filter's angle by more than
     /// `heal_agreement_deg` plus two of that filter's standard deviations.
     fn tps_disagrees_with_wattmeter(&self) -> bool {
-        let x = self.watt_ukf.state();
+        let (theta, sigma) = self.watt_only_angle();
+        self.tps_hist
+            .last()
+            .is_some_and(|tps| (tps - theta).abs() > self.cfg.heal_agreement_deg + 2.0 * sigma)
+    }
+
+    /// The wattmeter-only filter's plate angle and its standard deviation (deg).
+    fn watt_only_angle(&self) -> (f64, f64) {
         let sigma =
             self.watt_ukf.covariance()[(0, 0)].max(0.0).sqrt() / self.model.params().angle_scale;
-        self.tps_hist.last().is_some_and(|tps| {
-            (tps - self.model.angle_deg(x)).abs() > self.cfg.heal_agreement_deg + 2.0 * sigma
-        })
+        (self.model.angle_deg(self.watt_ukf.state()), sigma)
     }
 
     /// Names the fault behind the residual tests that fired in this episode, among the
@@ -1091,19 +1096,21 @@ impl Monitor for ThrottleMonitor {
         let limits = self.model.params().angle_limits_deg;
         let (mut rail_low, mut rail_high) = (false, false);
         if let Some(v) = tps {
-            rail_low = v <= self.cfg.rail_low_v
-                && theta_p - 3.0 * sigma_p > limits[0] + self.cfg.rail_margin_deg;
-            rail_high = v >= self.cfg.rail_high_v
-                && theta_p + 3.0 * sigma_p < limits[1] - self.cfg.rail_margin_deg;
+            // A rail reading that an angle estimate (deg, with its std) rules out: low, high.
+            let ruled_out = |theta: f64, sigma: f64| {
+                (
+                    v <= self.cfg.rail_low_v
+                        && theta - 3.0 * sigma > limits[0] + self.cfg.rail_margin_deg,
+                    v >= self.cfg.rail_high_v
+                        && theta + 3.0 * sigma < limits[1] - self.cfg.rail_margin_deg,
+                )
+            };
+            (rail_low, rail_high) = ruled_out(theta_p, sigma_p);
             if self.rail_fault_healed && self.watt_fault.is_none() {
-                let xw = self.watt_ukf.state();
-                let theta_w = self.model.angle_deg(xw);
-                let sigma_w = self.watt_ukf.covariance()[(0, 0)].max(0.0).sqrt()
-                    / self.model.params().angle_scale;
-                rail_low |= v <= self.cfg.rail_low_v
-                    && theta_w - 3.0 * sigma_w > limits[0] + self.cfg.rail_margin_deg;
-                rail_high |= v >= self.cfg.rail_high_v
-                    && theta_w + 3.0 * sigma_w < limits[1] - self.cfg.rail_margin_deg;
+                let (theta_w, sigma_w) = self.watt_only_angle();
+                let (low, high) = ruled_out(theta_w, sigma_w);
+                rail_low |= low;
+                rail_high |= high;
             }
             // A reading clipped at an ADC end repeats while the plate rests on that stop
             // (a TPS a percent high reads 5 V at the open stop): not a frozen signal.
