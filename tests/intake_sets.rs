@@ -235,13 +235,14 @@ fn run_log(path: &Path, cfg: &IntakeConfig) -> LogOutcome {
                     .iter()
                     .map(|f| {
                         format!(
-                            "{}:{:.0}[p={:.4e} g={:.3e} o={:.3e} r={:.3e}]",
+                            "{}:{:.0}[p={:.4e} g={:.3e} o={:.3e} r={:.3e} lag={}]",
                             f.fault.name(),
                             f.glr,
                             f.parameter,
                             f.gain,
                             f.offset,
-                            f.rate
+                            f.rate,
+                            f.lag_s
                         )
                     })
                     .collect();

@@ -94,7 +94,11 @@ const fn maf(truth: &'static str) -> FaultType {
 /// The EGR valve's DTC family: a valve stuck at one position gives too much flow where the
 /// command is below it and too little where it is above, so either DTC sends the mechanic to
 /// the valve.
-const EGR_DTCS: &[&str] = &["egr_flow_insufficient", "egr_flow_excessive"];
+const EGR_DTCS: &[&str] = &[
+    "egr_flow_insufficient",
+    "egr_flow_excessive",
+    "egr_slow_response",
+];
 
 const fn egr(truth: &'static str) -> FaultType {
     FaultType {

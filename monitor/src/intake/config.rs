@@ -210,6 +210,9 @@ pub struct IntakeMonitorConfig {
     pub dtc_egr_insufficient: String,
     pub dtc_egr_excessive: String,
     pub dtc_leak: String,
+    /// A sluggish EGR valve (its position lags the command): P0404 "EGR circuit
+    /// range/performance".
+    pub dtc_egr_slow_response: String,
     /// The group DTC: P0068 "MAP/MAF - throttle position correlation".
     pub dtc_group: String,
 }
@@ -299,6 +302,7 @@ impl Default for IntakeMonitorConfig {
             dtc_egr_insufficient: "P0401-00".into(),
             dtc_egr_excessive: "P0402-00".into(),
             dtc_leak: "P2279-00".into(),
+            dtc_egr_slow_response: "P0404-00".into(),
             dtc_group: "P0068-00".into(),
         }
     }

@@ -25,6 +25,7 @@
 //! | MAP sensor error | offset `b` (Pa) and gain `c` | `b + c p_ref` (immediately, no dynamics) | `-dW/dp (b + c p_ref)` |
 //! | MAF sensor gain | `g - 1` | `delta` of `u = -MAF` (the filter's air is `g` times too much) | `(g - 1) MAF` |
 //! | EGR valve stuck at `s` | `s` in `[0, 1]` | `delta` of `u = W_egr1 (s - e_cmd)` | 0 |
+//! | EGR valve lagging its command by `tau` ([`EGR_LAGS_S`]) | scale `k` in `(0, 2]` | `k delta` of `u = W_egr1 (y - e_cmd)`, `dy/dt = (e_cmd - y) / tau` from `y = e_cmd` at the onset | 0 |
 //! | leak | area `A >= 0` (m^2) | `delta` of `u = W_orifice1 A` | 0 |
 //!
 //! with `W_egr1` the EGR flow of a fully open valve and `W_orifice1` the flow of a unit-area
@@ -131,6 +132,27 @@ const MAP_GAIN_PENALTY: f64 = 60.0;
 /// hypothesis to fit an offset besides its gain (the same penalty as the MAP gain applies).
 const MAF_OFFSET_MIN_SPREAD_REL: f64 = 0.3;
 
+/// Time constants (s) of the sluggish-EGR-valve hypotheses: a healthy valve follows its
+/// command within about 0.1 s; these span a valve slowed five to eighty times, log-spaced so
+/// that the nearest is within a factor sqrt(2) of any lag in the range (a lag off by that
+/// much still explains most of the signature).
+pub const EGR_LAGS_S: [f64; 9] = [0.5, 0.71, 1.0, 1.41, 2.0, 2.83, 4.0, 5.66, 8.0];
+/// Number of sluggish-valve hypotheses.
+const LAGS: usize = EGR_LAGS_S.len();
+/// Largest scale of a sluggish valve's signature (-): the fit explains the residual as `k`
+/// times the flow error of a valve lagging its command, `k` in `(0, EGR_LAG_MAX_SCALE]`
+/// (about 1 when the valve's full-open flow is right; the bound keeps a signature of the right
+/// shape but the wrong size from passing for a slow valve).
+const EGR_LAG_MAX_SCALE: f64 = 2.0;
+/// A lag is fitted only once the fit has run for `lag / EGR_LAG_SEEN` (s).
+const EGR_LAG_SEEN: f64 = 0.5;
+
+/// A valve lagging its command: the position `y` (0..1) after `dt` (s) of first-order lag
+/// `tau` (s) behind the command `cmd` (exact for a command held over the step).
+fn lag_step(y: f64, cmd: f64, dt: f64, tau: f64) -> f64 {
+    cmd + (y - cmd) * (-dt / tau).exp()
+}
+
 /// Adds one regressor sample `h` (and the residual `z`) to a single-parameter fit's sums.
 fn add_ramp(sums: &mut [f64; 2], h: f64, z: f64) {
     sums[0] += h * h;
@@ -195,6 +217,10 @@ pub struct Fit {
     /// MAP and MAF hypotheses: the error's growth since the onset (Pa/s, kg/s per s) when the
     /// sensor drifts (then the other sizes are 0); 0 for the others.
     pub rate: f64,
+    /// EGR hypothesis only: the time constant (s) of a sluggish valve, which then lags its
+    /// command (and `parameter` is the signature's fitted scale, about 1); 0 for a valve stuck
+    /// at `parameter`, and for the others.
+    pub lag_s: f64,
 }
 
 /// Running least-squares sums since the onset.
@@ -240,6 +266,12 @@ pub struct HypothesisBank {
     /// The EGR hypothesis is a change of the stuck position from one already taken out of
     /// the residuals (a refit while a decided EGR fault is compensated): `z = ds g1`, any sign.
     egr_relative: bool,
+    /// Sluggish valve, one per [`EGR_LAGS_S`]: the lagged command (from the command at the
+    /// onset), the pressure response of its flow error `u = W_egr1 (y - e_cmd)`, and the
+    /// single-parameter sums (sum g^2, sum g z). Not fitted when `egr_relative`.
+    lag_cmd: [f64; LAGS],
+    lag_delta: [f64; LAGS],
+    lag_sums: [[f64; 2]; LAGS],
 }
 
 impl HypothesisBank {
@@ -267,6 +299,18 @@ impl HypothesisBank {
     pub fn push(&mut self, r: &SegmentRecord) {
         self.elapsed += r.dt;
         step_deltas(&mut self.delta, r, self.elapsed);
+        if self.segments == 0 {
+            self.lag_cmd = [r.egr_cmd; LAGS];
+        }
+        for ((y, d), lag) in self
+            .lag_cmd
+            .iter_mut()
+            .zip(self.lag_delta.iter_mut())
+            .zip(EGR_LAGS_S)
+        {
+            *y = lag_step(*y, r.egr_cmd, r.dt, lag);
+            *d = r.decay * *d + r.input_gain * r.egr_full * (*y - r.egr_cmd);
+        }
         self.segments += 1;
         let tau = self.elapsed;
         if r.z_p.is_finite() && r.s_p > 0.0 {
@@ -293,6 +337,9 @@ impl HypothesisBank {
             self.e11 += g1 * g1;
             self.e1v += g1 * v;
             self.evv += v * v;
+            for (sums, d) in self.lag_sums.iter_mut().zip(self.lag_delta) {
+                add_ramp(sums, d / r.s_p, z);
+            }
         }
         if r.z_w.is_finite() && r.s_w > 0.0 {
             let z = r.z_w;
@@ -457,6 +504,10 @@ impl HypothesisBank {
         } else {
             (0.0, 0.0)
         };
+        let (t_egr, s, egr_lag) = match self.sluggish_fit() {
+            Some((t, k, lag)) if t > t_egr => (t, k, lag),
+            _ => (t_egr, s, 0.0),
+        };
         [
             Fit {
                 fault: IntakeFault::MapSensor,
@@ -465,6 +516,7 @@ impl HypothesisBank {
                 gain: map_gain,
                 offset: 0.0,
                 rate: map_rate,
+                lag_s: 0.0,
             },
             Fit {
                 fault: IntakeFault::MafSensor,
@@ -473,6 +525,7 @@ impl HypothesisBank {
                 gain: 0.0,
                 offset: maf_offset,
                 rate: maf_rate,
+                lag_s: 0.0,
             },
             Fit {
                 fault: IntakeFault::EgrValve,
@@ -481,6 +534,7 @@ impl HypothesisBank {
                 gain: 0.0,
                 offset: 0.0,
                 rate: 0.0,
+                lag_s: egr_lag,
             },
             Fit {
                 fault: IntakeFault::Leak,
@@ -489,8 +543,46 @@ impl HypothesisBank {
                 gain: 0.0,
                 offset: 0.0,
                 rate: 0.0,
+                lag_s: 0.0,
             },
         ]
+    }
+
+    /// The best sluggish-valve hypothesis: `(T, k, lag_s)` for the residual fitted as `k` times
+    /// the signature of a valve lagging its command by `lag_s`, `k` in `(0, EGR_LAG_MAX_SCALE]`;
+    /// `None` in a refit relative to a decided EGR fault, or when no lag explains anything.
+    fn sluggish_fit(&self) -> Option<(f64, f64, f64)> {
+        if self.egr_relative {
+            return None;
+        }
+        let mut best: Option<(f64, f64, f64)> = None;
+        for (sums, lag) in self.lag_sums.iter().zip(EGR_LAGS_S) {
+            // Within its first time constants a slow valve has hardly moved: its signature is
+            // a stuck valve's (closed, or at the command at the onset). Only lags the fit has
+            // seen twice over (the valve 86 % of the way) tell it.
+            if !(sums[0] > 0.0 && sums[1] > 0.0) || lag > EGR_LAG_SEEN * self.elapsed {
+                continue;
+            }
+            let k = (sums[1] / sums[0]).min(EGR_LAG_MAX_SCALE);
+            let t = 2.0 * k * sums[1] - k * k * sums[0];
+            if best.is_none_or(|b| t > b.0) {
+                best = Some((t, k, lag));
+            }
+        }
+        // A best lag at the longest time constant is a valve slower than any the bank
+        // describes: under a command that has not moved much it is told from a valve stuck
+        // closed only by its size, so it is left to the stuck hypothesis (named sluggish first,
+        // such a valve would be named again as stuck).
+        best.filter(|b| b.2 < EGR_LAGS_S[LAGS - 1])
+    }
+
+    /// The sluggish valve of time constant `lag_s` (one of [`EGR_LAGS_S`]): its lagged command
+    /// and pressure response now, for a compensation to continue from.
+    fn lag_state(&self, lag_s: f64) -> (f64, f64) {
+        EGR_LAGS_S
+            .iter()
+            .position(|&l| l == lag_s)
+            .map_or((f64::NAN, 0.0), |j| (self.lag_cmd[j], self.lag_delta[j]))
     }
 
     /// Hypotheses sorted by decreasing statistic.
@@ -536,7 +628,13 @@ pub struct Compensation {
     pub offset: f64,
     /// MAP and MAF: the drift rate (Pa/s, kg/s per s).
     pub rate: f64,
+    /// EGR: the time constant (s) of a sluggish valve (then `parameter` is the signature's
+    /// scale), 0 for a stuck one.
+    pub lag_s: f64,
     delta: [f64; 6],
+    /// Sluggish valve: the lagged command (0..1) and the pressure response of its flow error.
+    lag_cmd: f64,
+    lag_delta: f64,
     /// Time since the fault's onset (s).
     elapsed: f64,
 }
@@ -544,14 +642,32 @@ pub struct Compensation {
 impl Compensation {
     /// The compensation of `fit`, fitted in `bank`.
     pub fn new(fit: &Fit, bank: &HypothesisBank) -> Self {
+        let (lag_cmd, lag_delta) = bank.lag_state(fit.lag_s);
         Self {
             fault: fit.fault,
             parameter: fit.parameter,
             gain: fit.gain,
             offset: fit.offset,
             rate: fit.rate,
+            lag_s: fit.lag_s,
             delta: bank.deltas(),
+            lag_cmd,
+            lag_delta,
             elapsed: bank.elapsed(),
+        }
+    }
+
+    /// The EGR position the model should be given for the command `cmd` held for the next
+    /// `dt` (s): the stuck position, or the sluggish valve's lagged command (scaled like its
+    /// fitted signature); `None` for the other faults.
+    pub fn egr_position(&self, cmd: f64, dt: f64) -> Option<f64> {
+        match self.fault {
+            IntakeFault::EgrValve if self.lag_s > 0.0 && self.lag_cmd.is_finite() => {
+                let y = lag_step(self.lag_cmd, cmd, dt, self.lag_s);
+                Some((cmd + self.parameter * (y - cmd)).clamp(0.0, 1.0))
+            }
+            IntakeFault::EgrValve => Some(self.parameter),
+            _ => None,
         }
     }
 
@@ -578,7 +694,9 @@ impl Compensation {
                 self.rate += fit.rate;
             }
             // The filters are given the decided position as the EGR input, so a refit is the
-            // position itself.
+            // position itself. A sluggish valve's refit (a stuck position relative to the
+            // lagged command it is compensated with) does not describe a lag: it stays.
+            IntakeFault::EgrValve if self.lag_s > 0.0 => {}
             IntakeFault::EgrValve => self.parameter = fit.parameter,
             IntakeFault::Leak => self.parameter += fit.parameter,
         }
@@ -617,6 +735,11 @@ impl Compensation {
     pub fn step(&mut self, r: &SegmentRecord) -> (f64, f64) {
         self.elapsed += r.dt;
         step_deltas(&mut self.delta, r, self.elapsed);
+        if self.lag_s > 0.0 && self.lag_cmd.is_finite() {
+            self.lag_cmd = lag_step(self.lag_cmd, r.egr_cmd, r.dt, self.lag_s);
+            self.lag_delta =
+                r.decay * self.lag_delta + r.input_gain * r.egr_full * (self.lag_cmd - r.egr_cmd);
+        }
         match self.fault {
             IntakeFault::MapSensor => {
                 let e = self.parameter
@@ -634,6 +757,7 @@ impl Compensation {
                     + self.rate * self.delta[5],
                 self.parameter * r.maf + self.offset + self.rate * self.elapsed,
             ),
+            IntakeFault::EgrValve if self.lag_s > 0.0 => (self.parameter * self.lag_delta, 0.0),
             IntakeFault::EgrValve => (self.parameter * self.delta[1] - self.delta[2], 0.0),
             IntakeFault::Leak => (self.parameter * self.delta[3], 0.0),
         }
@@ -848,6 +972,48 @@ mod tests {
                 ranked[0].parameter
             );
             assert!(ranked[0].glr > ranked[1].glr + 1.0, "{ranked:?}");
+        }
+    }
+
+    /// A valve lagging its command by 2 s (one of the bank's time constants), the command
+    /// stepping every second and a half: the EGR hypothesis fits it as sluggish, scale 1 and
+    /// lag 2 s, better than any stuck position and than every other hypothesis; the
+    /// compensation built from the fit predicts the residual it leaves from then on, and hands
+    /// the model the lagged position.
+    #[test]
+    fn a_sluggish_egr_valve_is_fitted_as_one() {
+        let lag = 2.0;
+        let cmd_at = |k: usize| if (k / 75) % 2 == 0 { 0.1 } else { 0.4 };
+        let mut bank = HypothesisBank::new();
+        let (mut y, mut d) = (cmd_at(0), 0.0);
+        let step = |k: usize, y: &mut f64, d: &mut f64| {
+            let cmd = cmd_at(k);
+            let mut r = record(0.0, f64::NAN, 0.02, cmd);
+            *y = cmd + (*y - cmd) * (-r.dt / lag).exp();
+            *d = r.decay * *d + r.input_gain * r.egr_full * (*y - cmd);
+            r.z_p = *d / r.s_p;
+            r
+        };
+        for k in 0..600 {
+            bank.push(&step(k, &mut y, &mut d));
+        }
+        let ranked = bank.ranked();
+        let egr = ranked[0];
+        assert_eq!(egr.fault, IntakeFault::EgrValve, "{ranked:?}");
+        assert_eq!(egr.lag_s, lag, "{egr:?}");
+        assert!((egr.parameter - 1.0).abs() < 1e-9, "{egr:?}");
+        assert!(egr.glr > ranked[1].glr + 100.0, "{ranked:?}");
+        let mut comp = Compensation::new(&egr, &bank);
+        for k in 600..900 {
+            let r = step(k, &mut y, &mut d);
+            let pos = comp.egr_position(r.egr_cmd, r.dt).unwrap_or(f64::NAN);
+            assert!((pos - y).abs() < 1e-12, "segment {k}: {pos} vs {y}");
+            let (p, w) = comp.step(&r);
+            assert!(
+                (p - d).abs() < 1e-6 * d.abs().max(1.0),
+                "segment {k}: {p} vs {d}"
+            );
+            assert_eq!(w, 0.0);
         }
     }
 

@@ -67,7 +67,9 @@
 //! failing test's estimated onset (the last time its CUSUM was zero) and then follows every
 //! segment; the best hypothesis is named when it is significant and leads the runner-up
 //! clearly (see [`IntakeMonitorConfig`]). The EGR DTC is P0401 (insufficient) when the fitted
-//! stuck position is below the mean command since the onset, P0402 (excessive) otherwise.
+//! stuck position is below the mean command since the onset, P0402 (excessive) otherwise;
+//! P0404 (range/performance, `egr_slow_response`) when a valve lagging its command explains
+//! the residuals better than any stuck position.
 //! When the hypotheses stay ambiguous (a leak and an EGR valve stuck open at idle explain the
 //! same data), the **group DTC** `intake_air_path_group` (P0068) fails `group_after_s` after
 //! the alarm, with every hypothesis within `group_margin` of the best as its candidates; when
@@ -133,7 +135,7 @@ const ESTIMATE_SETTLE_SEGMENTS: f64 = 10.0;
 const HEALED_FRACTION: f64 = 0.25;
 
 /// Number of events.
-pub const EVENTS: usize = 10;
+pub const EVENTS: usize = 11;
 
 /// Event names, in the order of the DTC settings.
 pub const EVENT_NAMES: [&str; EVENTS] = [
@@ -147,11 +149,14 @@ pub const EVENT_NAMES: [&str; EVENTS] = [
     "egr_flow_excessive",
     "intake_leak",
     "intake_air_path_group",
+    "egr_slow_response",
 ];
 
 /// The group event: detected, not isolated yet (its candidates are the hypotheses left).
 pub const GROUP_EVENT: &str = "intake_air_path_group";
 const GROUP: usize = 9;
+/// The sluggish EGR valve's event.
+const EGR_SLOW: usize = 10;
 
 /// The fault classes of the monitor's diagnosis output: the isolation bank's hypotheses
 /// ([`IntakeFault::name`], in the order of [`ALL_FAULTS`]).
@@ -671,6 +676,7 @@ impl IntakeMonitor {
             &cfg.dtc_egr_excessive,
             &cfg.dtc_leak,
             &cfg.dtc_group,
+            &cfg.dtc_egr_slow_response,
         ];
         let specs: Vec<EventSpec<'_>> = EVENT_NAMES
             .iter()
@@ -1192,6 +1198,7 @@ impl IntakeMonitor {
         let egr = self.residual[IntakeFault::EgrValve.index()].map(|f| f.event);
         verdicts[6] = pick(egr == Some(6), quiet && egr.is_none());
         verdicts[7] = pick(egr == Some(7), quiet && egr.is_none());
+        verdicts[EGR_SLOW] = pick(egr == Some(EGR_SLOW), quiet && egr.is_none());
         verdicts[8] = pick(self.residual[IntakeFault::Leak.index()].is_some(), quiet);
         verdicts[GROUP] = pick(self.group, quiet || group_passed);
 
@@ -1241,8 +1248,11 @@ impl IntakeMonitor {
             c.maf_kg_s = f.comp.correct(seg.maf_kg_s, dt);
         }
         let maf_sensor = c.maf_kg_s;
-        if let Some(f) = &self.residual[IntakeFault::EgrValve.index()] {
-            c.egr_cmd = f.comp.parameter;
+        if let Some(p) = self.residual[IntakeFault::EgrValve.index()]
+            .as_ref()
+            .and_then(|f| f.comp.egr_position(seg.egr_cmd, dt))
+        {
+            c.egr_cmd = p;
         }
         if let Some(f) = &self.residual[IntakeFault::Leak.index()] {
             // The leak's flow at the pressure the MAP-only filter estimates (it follows the true
@@ -1623,6 +1633,7 @@ impl IntakeMonitor {
         let event = match best.fault {
             IntakeFault::MapSensor => 0,
             IntakeFault::MafSensor => 3,
+            IntakeFault::EgrValve if best.lag_s > 0.0 => EGR_SLOW,
             IntakeFault::EgrValve => {
                 let mean_cmd = ep.cmd_sum / ep.segments.max(1) as f64;
                 if best.parameter < mean_cmd {
