@@ -11,10 +11,10 @@ script would write.
 
 How the sets differ (also in fixtures/sets/README.md):
 
-- **seeds**: the tuning set's scenario seeds are 10000 + i, the held-out set's 30000 + i, and
-  every random choice below is drawn from a generator of its own per set (seed 1 and 3); the
-  held-out set is version 2: version 1 (seeds 20000 + i, generator seed 2) was evaluated once
-  and is retired;
+- **seeds**: the tuning set's scenario seeds are 10000 + i, the held-out set's 40000 + i, and
+  every random choice below is drawn from a generator of its own per set (seed 1 and 4); the
+  held-out set is version 3: version 1 (seeds 20000 + i, generator seed 2) and version 2
+  (seeds 30000 + i, generator seed 3) were each evaluated once and are retired;
 - **drive styles**: tuning drives `mixed`, `tip_in_out` (EGR 0.2..0.4 in the tip-outs),
   `steady_holds` and `idle`; held-out drives `pedal_ramps`, `idle_blips` and `speed_sweep`,
   which the tuning set never sees;
@@ -265,7 +265,7 @@ def all_sets():
         ],
     )
     heldout = make_set(
-        "held", random.Random(3), 30000, 3, HELDOUT_STYLES, "idle_blips", (600.0, 720.0),
+        "held", random.Random(4), 40000, 3, HELDOUT_STYLES, "idle_blips", (600.0, 720.0),
         (90.0, 180.0),
         nominal=[(4, "pedal_ramps", (900.0, 900.0)), (2, "idle_blips", (900.0, 900.0)),
                  (2, "speed_sweep", (900.0, 900.0))],
