@@ -2143,6 +2143,26 @@ impl IntakeMonitor {
     /// The estimate output of this segment: from the filter the recovery policy chooses.
     fn estimate(&self, seg: &Segment, map_ok: bool, maf_ok: bool) -> Option<Estimates> {
         let f = self.filters.as_ref()?;
+        // Both sensors named failed: every filter leans on a failed reading (a stuck MAF holds
+        // the MAF-local pressure wherever it stuck), so the throttle model's steady state for
+        // the segment's inputs (angle, speed, EGR command) gives the pressure, within the
+        // model's own relative error (`pressure_model_rel`; the manifold settles within a
+        // few tenths of a second, so only transients are worse).
+        if self.sensor_named(MAP) && self.sensor_named(MAF) {
+            let u = IntakeInput::new(seg.speed_rpm, seg.throttle_deg, seg.egr_cmd);
+            if let Some(x) = self.model.equilibrium(&u) {
+                let pm = x[X_PM];
+                let half = 1.96 * self.cfg.pressure_model_rel * pm;
+                let (slope, _) = self.model.vol_eff(seg.speed_rpm);
+                return Some(Estimates {
+                    pm,
+                    half,
+                    w: self.model.intake_valve_flow(pm, seg.speed_rpm),
+                    w_half: slope * half,
+                    source: "throttle_model",
+                });
+            }
+        }
         let (x, p, source) = match self.output_filter(map_ok, maf_ok) {
             OutputFilter::MafLocal => (
                 f.pair.local2().state(),

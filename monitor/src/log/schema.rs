@@ -427,7 +427,7 @@ pub const INTAKE_ESTIMATE: TopicSchema = TopicSchema {
     "value": {"type": ["number", "null"], "description": "the estimate, in the unit of its name"},
     "lower": {"type": ["number", "null"], "description": "lower end of the 95% interval"},
     "upper": {"type": ["number", "null"], "description": "upper end of the 95% interval"},
-    "source": {"type": "string", "description": "the filter: centralized_ekf, decentralized_ekf or federated_ekf"}
+    "source": {"type": "string", "description": "the filter: centralized_ekf, decentralized_ekf or federated_ekf; maf_local_ekf or map_local_ekf after a sensor, EGR or leak fault; throttle_model (the model's steady state) with both sensors failed"}
   },
   "required": ["name", "value", "lower", "upper", "source"],
   "additionalProperties": false
