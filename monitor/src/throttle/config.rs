@@ -44,6 +44,12 @@ pub struct ThrottleMonitorConfig {
     pub rail_margin_deg: f64,
     /// Implausible rail readings lasting this long are an open circuit / short (s).
     pub rail_persist_s: f64,
+    /// A rail reading that the wattmeter-only filter rules out for this long (s) counts as
+    /// implausible too, even when the combined filter (which follows the TPS) does not: a TPS
+    /// stuck or shorted at the stop's reading while the plate has left the stop. Long, because
+    /// near a stop that filter's estimate sits inside the range and flickers (judged at every
+    /// sample, it failed a healthy TPS that clips at the stop).
+    pub watt_rail_persist_s: f64,
     /// Shorter episodes are dropouts; this many within `intermittent_window_s` are an
     /// intermittent circuit.
     pub intermittent_count: usize,
@@ -175,6 +181,7 @@ impl Default for ThrottleMonitorConfig {
             rail_high_v: 4.97,
             rail_margin_deg: 2.0,
             rail_persist_s: 0.02,
+            watt_rail_persist_s: 1.0,
             intermittent_count: 3,
             intermittent_window_s: 2.0,
             frozen_samples: 40,

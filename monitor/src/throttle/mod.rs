@@ -265,6 +265,10 @@ pub struct ThrottleMonitor {
     tps_hist: SpanWindow,
     eq_hist: SpanWindow,
     rail_persist: u32,
+    /// Samples in a row whose rail reading the wattmeter-only filter rules out, and how many
+    /// make that a rail fault (`watt_rail_persist_s`).
+    watt_rail_run: u32,
+    watt_rail_persist: u32,
     rail_low_run: u32,
     rail_high_run: u32,
     /// A TPS circuit fault healed in this operation cycle on rail readings the estimate could
@@ -341,6 +345,7 @@ impl ThrottleMonitor {
             ("tps_noise_v", cfg.tps_noise_v),
             ("wattmeter_noise_w", cfg.wattmeter_noise_w),
             ("rail_persist_s", cfg.rail_persist_s),
+            ("watt_rail_persist_s", cfg.watt_rail_persist_s),
             ("decision_window_s", cfg.decision_window_s),
             ("motion_window_s", cfg.motion_window_s),
             ("intermittent_window_s", cfg.intermittent_window_s),
@@ -518,6 +523,8 @@ impl ThrottleMonitor {
             tps_hist: SpanWindow::new(motion),
             eq_hist: SpanWindow::new(motion),
             rail_persist: ((cfg.rail_persist_s / cfg.period_s).round() as u32).max(1),
+            watt_rail_run: 0,
+            watt_rail_persist: ((cfg.watt_rail_persist_s / cfg.period_s).round() as u32).max(1),
             rail_low_run: 0,
             rail_high_run: 0,
             rail_fault_healed: false,
@@ -620,6 +627,7 @@ impl ThrottleMonitor {
         self.rail_low_run = 0;
         self.rail_high_run = 0;
         self.rail_fault_healed = false;
+        self.watt_rail_run = 0;
     }
 
     /// Puts the noise estimates into the filters' `R` every [`NOISE_UPDATE_STEPS`] steps once
@@ -1106,11 +1114,20 @@ impl Monitor for ThrottleMonitor {
                 )
             };
             (rail_low, rail_high) = ruled_out(theta_p, sigma_p);
-            if self.rail_fault_healed && self.watt_fault.is_none() {
+            if self.watt_fault.is_none() {
                 let (theta_w, sigma_w) = self.watt_only_angle();
                 let (low, high) = ruled_out(theta_w, sigma_w);
-                rail_low |= low;
-                rail_high |= high;
+                self.watt_rail_run = if low || high {
+                    self.watt_rail_run.saturating_add(1)
+                } else {
+                    0
+                };
+                if self.rail_fault_healed || self.watt_rail_run >= self.watt_rail_persist {
+                    rail_low |= low;
+                    rail_high |= high;
+                }
+            } else {
+                self.watt_rail_run = 0;
             }
             // A reading clipped at an ADC end repeats while the plate rests on that stop
             // (a TPS a percent high reads 5 V at the open stop): not a frozen signal.
