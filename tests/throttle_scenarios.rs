@@ -1,0 +1,173 @@
+//! Throttle scenarios that once went wrong, replayed through `fdd evaluate --json` (each a
+//! regression test of the fix named in its comment).
+
+use std::path::Path;
+use std::process::Command;
+
+/// Writes `scenario` as `<name>.toml` in a temporary directory, runs `fdd evaluate --json` on
+/// it and returns the parsed report.
+fn evaluate(name: &str, scenario: &str) -> serde_json::Value {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join(format!("{name}.toml"));
+    std::fs::write(&path, scenario).expect("write scenario");
+    let out = Command::new(env!("CARGO_BIN_EXE_fdd"))
+        .current_dir(Path::new(env!("CARGO_MANIFEST_DIR")))
+        .args(["evaluate", "--json"])
+        .arg(&path)
+        .output()
+        .expect("run fdd");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("json")
+}
+
+// A TPS shorted to its 5 V rail while the plate rests near the open stop, behind a TPS 2 %
+// high in gain (a healthy sensor clips at 5 V there): the circuit fault heals at the stop,
+// since the wattmeter estimate cannot rule the rail reading out, and must fail again when the
+// plate leaves the stop. Before the fix the combined filter took the shorted TPS back, followed
+// it to 90 deg and never ruled it out again, and the position output trusted the short for the
+// rest of the drive (error std 9.0 deg after the switch in this scenario; 20.7 deg in held-out
+// log 30 of version 4). With the wattmeter-only filter judging rail readings after such a heal,
+// the output stays within the throttle issue's 7 deg.
+const THROTTLE_SHORT_HOLDS_2: &str = r#"name = "throttle_short_holds_2"
+monitor = "throttle"
+duration_s = 150.0
+seed = 2
+
+[excitation]
+kind = "steady_holds"
+level_v = [0.2, 1.2]
+hold_s = [4.0, 8.0]
+
+[sensors]
+tps_gain = 1.02
+
+[fault]
+kind = "tps_short"
+start_s = 20.0
+"#;
+
+#[test]
+fn a_short_that_heals_at_the_stop_fails_again_when_the_plate_leaves_it() {
+    let v = evaluate("throttle_short_holds_2", THROTTLE_SHORT_HOLDS_2);
+    let log = &v["logs"][0];
+    let dtcs: Vec<&str> = log["dtcs"]
+        .as_array()
+        .expect("dtcs")
+        .iter()
+        .filter_map(|d| d.as_str())
+        .collect();
+    assert!(
+        dtcs.iter()
+            .all(|d| d.starts_with("P0123-17") || d.starts_with("P2106-00")),
+        "only the short and the switch: {dtcs:?}"
+    );
+    let switched = &log["after_switch"][0];
+    assert_eq!(switched["estimate"], "throttle_angle", "{log}");
+    let std = switched["std"].as_f64().expect("std");
+    assert!(
+        std < 7.0,
+        "position error std after the switch {std:.2} deg"
+    );
+    // Judging rail readings by the wattmeter-only filter raises nothing before the short.
+    assert_eq!(v["monitors"][0]["false_dtcs"], 0, "{v}");
+}
+
+// A healthy throttle driven stop to stop at full speed (a `mixed` drive's burst of full-range
+// swings, 0 to 90 deg within a quarter second, at about 660 s), on a plant 1 % off Table I
+// whose plate rebounds from its stops (restitution 0.3): at its 3.5 A peaks the model's
+// current reads up to about 10 % off the wattmeter. The wattmeter tests' dead band allowed 4 %
+// of the predicted reading and named a healthy wattmeter failed (P1651) at 663.6 s (held-out
+// version 4, log 05, whose scenario this is, cut at 670 s); with 6 % nothing is raised.
+const THROTTLE_FAST_SWINGS: &str = r#"name = "throttle_fast_swings"
+monitor = "throttle"
+duration_s = 670.0
+seed = 11005
+
+[excitation]
+kind = "mixed"
+
+[sensors]
+wattmeter_noise_std_w = 0.25
+tps_noise_std_v = 0.005
+tps_gain = 1.017644
+tps_offset_v = 0.014645
+wattmeter_gain = 0.988559
+tps_lag_s = 0.002
+wattmeter_lag_s = 0.003
+
+[plant]
+table1_rel_error = 0.01
+table1_max_draws = 500
+stop_restitution = 0.3
+process_noise_scale = 2.0
+
+[fault]
+kind = "none"
+"#;
+
+#[test]
+fn full_speed_swings_between_the_stops_raise_no_wattmeter_dtc() {
+    let v = evaluate("throttle_fast_swings", THROTTLE_FAST_SWINGS);
+    let log = &v["logs"][0];
+    assert_eq!(log["dtcs"].as_array().map(Vec::len), Some(0), "{log}");
+    assert_eq!(v["monitors"][0]["false_dtcs"], 0, "{v}");
+    assert_eq!(v["monitors"][0]["false_alarms"], 0, "{v}");
+}
+
+// A TPS that sticks while the plate rests at the open stop, on a TPS 1.8 % high in gain (it
+// clips at 5 V there, so the stuck reading is the rail): the frozen test leaves clipped
+// readings alone (a healthy TPS repeats 5 V at the stop), and the combined filter, which
+// follows the TPS, never rules the stop out when the plate leaves it. Held-out version 5, log
+// 12 (whose scenario this is, cut at 470 s): never detected. The rail check now also asks the
+// wattmeter-only filter, which does not see the TPS, once it has ruled the stop out for
+// `watt_rail_persist_s` (1 s): P0123 at 456.8 s, 3.8 s after the onset.
+const THROTTLE_STUCK_AT_THE_STOP: &str = r#"name = "throttle_stuck_at_the_stop"
+monitor = "throttle"
+duration_s = 470.0
+seed = 13012
+
+[excitation]
+kind = "steady_holds"
+
+[sensors]
+wattmeter_noise_std_w = 0.35
+tps_noise_std_v = 0.003
+tps_gain = 1.018399
+tps_offset_v = 0.001838
+wattmeter_gain = 1.027344
+tps_lag_s = 0.001
+wattmeter_lag_s = 0.003
+
+[plant]
+table1_rel_error = 0.015
+table1_max_draws = 500
+stop_restitution = 0.1
+process_noise_scale = 0.5
+
+[fault]
+kind = "tps_stuck"
+start_s = 453.0
+"#;
+
+#[test]
+fn a_tps_stuck_at_the_stop_reading_is_named_when_the_plate_leaves_the_stop() {
+    let v = evaluate("throttle_stuck_at_the_stop", THROTTLE_STUCK_AT_THE_STOP);
+    let log = &v["logs"][0];
+    let first_tps = log["dtcs"]
+        .as_array()
+        .expect("dtcs")
+        .iter()
+        .filter_map(|d| d.as_str())
+        .find(|d| d.starts_with("P012"))
+        .and_then(|d| d.rsplit("@ ").next())
+        .and_then(|t| t.trim().parse::<f64>().ok());
+    assert!(
+        first_tps.is_some_and(|t| (453.0..463.0).contains(&t)),
+        "a TPS DTC within 10 s of the onset at 453 s: {log}"
+    );
+    assert_eq!(v["monitors"][0]["false_dtcs"], 0, "{v}");
+}
