@@ -9,13 +9,20 @@
 //!    bounds. The monitor's online noise estimates (`tps_noise_std_v`,
 //!    `wattmeter_noise_std_w`, see `fdd_estimators::NoiseLevel`) at the end of each log give
 //!    the noise levels (the median over the logs).
-//! 2. A second pass runs with those noise levels. Each test's statistic is cut into blocks of
+//! 2. **The model** (unless `--keep-model`): the same pass gathers the motor voltage, TPS and
+//!    wattmeter samples, and the throttle model (27 Table I values) is re-identified from
+//!    them by prediction error ([`fdd_estimators::models::throttle_identification`]) at those
+//!    noise levels. A plant a few percent off Table I is fitted a little better; one 20 % off
+//!    (the wattmeter residual of the default fails within seconds) becomes testable at all.
+//!    The wattmeter residual's model error (the dead band `watt_model_error_w`) is then
+//!    measured again with the identified model.
+//! 3. A second pass runs with those noise levels (and model). Each test's statistic is cut into blocks of
 //!    `block_s` seconds; a generalized extreme-value law is fitted to the block maxima by
 //!    L-moments ([`fdd_diagnostics::extreme_value::GevFit`]: a CUSUM fed by model error that
 //!    comes and goes has a heavier tail than Gumbel's) and the threshold is the value a block maximum
 //!    exceeds with probability `rate * block_s / 3600`: it extrapolates beyond the largest
 //!    value seen.
-//! 3. **Refusals.** A log whose ground truth says a fault is active; fewer than 20 blocks of a
+//! 4. **Refusals.** A log whose ground truth says a fault is active; fewer than 20 blocks of a
 //!    statistic; a rate asking to extrapolate more than [`MAX_EXTRAPOLATION`] times the data's
 //!    length; block maxima that do not follow the law (probability-plot correlation below
 //!    [`MIN_PPCC`]), or one above the threshold it gives (the data would alarm at the rate
@@ -25,6 +32,9 @@ use std::path::{Path, PathBuf};
 
 use fdd_diagnostics::extreme_value::{FitError, GevFit};
 use fdd_diagnostics::Verdict;
+use fdd_estimators::models::throttle_identification::{
+    identify, IdSample, Identified, IdentifyError, IdentifySettings, IDENTIFIED_KEYS,
+};
 use fdd_monitor::monitor::Output;
 use fdd_monitor::runtime::config::TruthConfig;
 use fdd_monitor::runtime::Runtime;
@@ -40,6 +50,12 @@ pub const MAX_EXTRAPOLATION: f64 = 1e4;
 /// CUSUMs' run-length solution needs it).
 const UNREACHABLE_CUSUM: f64 = 400.0;
 const UNREACHABLE_NIS: f64 = 1e12;
+
+/// The runtime signals the model is re-identified from: motor voltage, TPS, wattmeter.
+const IDENTIFICATION_SIGNALS: [&str; 3] = ["motor_voltage", "tps", "wattmeter"];
+/// Samples per log kept for the identification (1 h at 1 kHz, 86 MB): bounds the memory on
+/// long logs; a longer log identifies from its first hour.
+const MAX_IDENTIFICATION_SAMPLES: usize = 3_600_000;
 
 /// Time constant of the low-pass that separates the wattmeter residual's slowly varying part
 /// (model error) from its noise (s).
@@ -105,6 +121,10 @@ pub enum CalibrateError {
     },
     #[error("{origin}: {message}")]
     Toml { origin: String, message: String },
+    #[error("re-identifying the throttle model: {0}")]
+    Identify(#[from] IdentifyError),
+    #[error("re-identifying the throttle model: {incomplete} of the logs' timestamps lack one of the signals {IDENTIFICATION_SIGNALS:?} (the identification needs the three sampled together)")]
+    Unaligned { incomplete: u64 },
 }
 
 /// What `fdd calibrate` asks for.
@@ -114,6 +134,9 @@ pub struct CalibrateOptions {
     pub false_alarms_per_hour: f64,
     /// Block length of the block maxima (s).
     pub block_s: f64,
+    /// Re-identify the throttle model from the logs before the thresholds (default); `false`
+    /// keeps the starting configuration's model.
+    pub identify: bool,
 }
 
 impl Default for CalibrateOptions {
@@ -121,6 +144,7 @@ impl Default for CalibrateOptions {
         Self {
             false_alarms_per_hour: 1e-3,
             block_s: 10.0,
+            identify: true,
         }
     }
 }
@@ -149,6 +173,8 @@ pub struct Calibration {
     /// `throttle.toml` and `fdd.toml` texts.
     pub throttle_toml: String,
     pub runtime_toml: String,
+    /// The re-identified model, when asked for.
+    pub identified: Option<Identified>,
 }
 
 /// Statistics of one replay pass.
@@ -167,12 +193,37 @@ struct Collector {
     watt_lp_block: Option<(u64, f64)>,
     watt_lp_maxima: Vec<f64>,
     fault: Option<(String, f64)>,
+    /// With `Some`, the throttle's raw signals per log (for the model's re-identification):
+    /// the samples of one timestamp gathered in `pending`, the complete ones kept.
+    records: Option<Vec<Vec<IdSample>>>,
+    pending: (u64, [Option<f64>; 3]),
+    /// Timestamps at which not all three signals arrived (left out of the identification).
+    incomplete: u64,
     first_ns: Option<u64>,
     last_ns: u64,
     total_ns: u64,
 }
 
 impl Collector {
+    /// Keeps the pending timestamp's samples if all three signals arrived.
+    fn take_pending(&mut self) {
+        let (_, v) = std::mem::take(&mut self.pending);
+        let Some(records) = self.records.as_mut() else {
+            return;
+        };
+        match v {
+            [Some(u_v), Some(tps_v), Some(watt_w)] => {
+                if let Some(r) = records.last_mut() {
+                    if r.len() < MAX_IDENTIFICATION_SAMPLES {
+                        r.push(IdSample { u_v, tps_v, watt_w });
+                    }
+                }
+            }
+            [None, None, None] => {}
+            _ => self.incomplete += 1,
+        }
+    }
+
     fn flush(&mut self) {
         for (i, c) in self.current.iter_mut().enumerate() {
             if let Some((start, m)) = c.take() {
@@ -189,6 +240,24 @@ impl ReplayObserver for Collector {
         self.watt_lp_block = None;
         self.noise = (f64::NAN, f64::NAN);
         self.first_ns = None;
+        if let Some(r) = self.records.as_mut() {
+            r.push(Vec::new());
+        }
+        self.pending = (0, [None; 3]);
+    }
+
+    fn sample(&mut self, t_ns: u64, signal: &str, value: f64) {
+        let Some(k) = IDENTIFICATION_SIGNALS.iter().position(|s| *s == signal) else {
+            return;
+        };
+        if self.records.is_none() {
+            return;
+        }
+        if t_ns != self.pending.0 {
+            self.take_pending();
+            self.pending.0 = t_ns;
+        }
+        self.pending.1[k] = Some(value);
     }
 
     fn output(&mut self, t_ns: u64, monitor: &str, output: &Output<'_>) {
@@ -250,6 +319,7 @@ impl ReplayObserver for Collector {
     }
 
     fn end_log(&mut self) {
+        self.take_pending();
         // The last, partial block is dropped.
         self.current = [None; TESTS.len()];
         if let Some(a) = self.first_ns {
@@ -280,10 +350,45 @@ fn with_monitor_keys(
     Ok(doc.to_string())
 }
 
+/// Replaces the `[[model.modes]]` values in a throttle configuration text by the identified
+/// ones (comments kept).
+fn with_model(text: &str, origin: &str, id: &Identified) -> Result<String, CalibrateError> {
+    let mut doc: toml_edit::DocumentMut =
+        text.parse()
+            .map_err(|e: toml_edit::TomlError| CalibrateError::Toml {
+                origin: origin.to_string(),
+                message: e.to_string(),
+            })?;
+    let modes = doc
+        .get_mut("model")
+        .and_then(|m| m.get_mut("modes"))
+        .and_then(|m| m.as_array_of_tables_mut())
+        .ok_or_else(|| CalibrateError::Toml {
+            origin: origin.to_string(),
+            message: "[[model.modes]]: expected an array of three tables".into(),
+        })?;
+    for (s, table) in modes.iter_mut().enumerate() {
+        let Some(m) = id.params.modes.get(s) else {
+            break;
+        };
+        let v = [m.a21, m.a22, m.a23, m.a32, m.a33, m.b, m.c1, m.c2, m.c3];
+        for (k, x) in IDENTIFIED_KEYS.iter().zip(v) {
+            table[*k] = toml_edit::value(x);
+        }
+    }
+    Ok(doc.to_string())
+}
+
 /// Runs every log through the runtime of `cfg` with `collector`.
-fn pass(logs: &[PathBuf], cfg: &RuntimeConfig, block_s: f64) -> Result<Collector, CalibrateError> {
+fn pass(
+    logs: &[PathBuf],
+    cfg: &RuntimeConfig,
+    block_s: f64,
+    gather: bool,
+) -> Result<Collector, CalibrateError> {
     let mut c = Collector {
         block_ns: (block_s * 1e9) as u64,
+        records: gather.then(Vec::new),
         ..Collector::default()
     };
     for (i, file) in logs.iter().enumerate() {
@@ -386,15 +491,56 @@ pub fn calibrate(
     ]);
     let text = with_monitor_keys(&throttle_text, &throttle_origin, &keys)?;
     let cfg = runtime_with(base, work.path(), &text)?;
-    // The per-log levels: the collector keeps the last of each log.
+    // The per-log levels: the collector keeps the last of each log. With re-identification,
+    // the first pass also gathers the raw signals, and the model error is measured again with
+    // the identified model.
     let mut tps_levels = Vec::new();
     let mut watt_levels = Vec::new();
     let mut model_error = Vec::new();
+    let mut records = Vec::new();
+    let mut incomplete = 0;
     for log in &logs {
-        let c = pass(std::slice::from_ref(log), &cfg, opts.block_s)?;
+        let c = pass(std::slice::from_ref(log), &cfg, opts.block_s, opts.identify)?;
         tps_levels.push(c.noise.0);
         watt_levels.push(c.noise.1);
         model_error.extend(c.watt_lp_maxima);
+        records.extend(c.records.into_iter().flatten());
+        incomplete += c.incomplete;
+    }
+    let tps_noise_v = median(tps_levels);
+    let wattmeter_noise_w = median(watt_levels);
+    if !(tps_noise_v.is_finite() && wattmeter_noise_w.is_finite()) {
+        return Err(CalibrateError::NoData("tps_noise_std_v"));
+    }
+    let mut throttle_text = throttle_text;
+    let mut identified = None;
+    if opts.identify {
+        let total: usize = records.iter().map(Vec::len).sum();
+        if incomplete as usize > total / 10 {
+            return Err(CalibrateError::Unaligned { incomplete });
+        }
+        let start = fdd_monitor::config::ThrottleConfig::parse(&throttle_text, &throttle_origin)?;
+        let settings = IdentifySettings {
+            tps_var_v2: tps_noise_v * tps_noise_v,
+            watt_var_w2: wattmeter_noise_w * wattmeter_noise_w,
+            q_diag: start.wattmeter_ukf.q_diag,
+            p0_diag: start.wattmeter_ukf.p0_diag,
+            tps_v_per_deg: start.position_sensor.full_scale_v
+                / start.position_sensor.full_scale_deg,
+            ..IdentifySettings::default()
+        };
+        let slices: Vec<&[IdSample]> = records.iter().map(Vec::as_slice).collect();
+        let id = identify(&slices, &start.model, &settings)?;
+        drop(records);
+        throttle_text = with_model(&throttle_text, &throttle_origin, &id)?;
+        identified = Some(id);
+        let text = with_monitor_keys(&throttle_text, &throttle_origin, &keys)?;
+        let cfg = runtime_with(base, work.path(), &text)?;
+        model_error.clear();
+        for log in &logs {
+            let c = pass(std::slice::from_ref(log), &cfg, opts.block_s, false)?;
+            model_error.extend(c.watt_lp_maxima);
+        }
     }
     // The dead band of the wattmeter test: the 90th percentile of the blocks' largest
     // low-passed residual (what model error alone reaches in most blocks).
@@ -403,11 +549,8 @@ pub fn calibrate(
         .get(model_error.len() * 9 / 10)
         .copied()
         .unwrap_or(f64::NAN);
-    let tps_noise_v = median(tps_levels);
-    let wattmeter_noise_w = median(watt_levels);
-    if !(tps_noise_v.is_finite() && wattmeter_noise_w.is_finite() && watt_model_error_w.is_finite())
-    {
-        return Err(CalibrateError::NoData("tps_noise_std_v"));
+    if !watt_model_error_w.is_finite() {
+        return Err(CalibrateError::NoData("wattmeter_cusum"));
     }
 
     // Pass 2: the statistics at those levels (bounds around them, as the calibrated
@@ -425,7 +568,7 @@ pub fn calibrate(
     keys.extend(noise_keys);
     let text = with_monitor_keys(&throttle_text, &throttle_origin, &keys)?;
     let cfg = runtime_with(base, work.path(), &text)?;
-    let c = pass(&logs, &cfg, opts.block_s)?;
+    let c = pass(&logs, &cfg, opts.block_s, false)?;
     let hours = c.total_ns as f64 * 1e-9 / 3600.0;
     let ratio = 1.0 / (opts.false_alarms_per_hour * hours);
     if !(ratio <= MAX_EXTRAPOLATION) {
@@ -521,6 +664,7 @@ pub fn calibrate(
         tests,
         throttle_toml,
         runtime_toml: doc.to_string(),
+        identified,
     })
 }
 
@@ -561,6 +705,24 @@ impl Calibration {
             self.wattmeter_noise_w,
             self.watt_model_error_w
         );
+        if let Some(id) = &self.identified {
+            let _ = writeln!(
+                s,
+                "model re-identified ({} iterations{}; samples per mode {:?}): normalized innovation power {:.3} -> {:.3}; rms TPS {:.2} -> {:.2} mV, wattmeter {:.3} -> {:.3} W; spectral radius {:.4} {:.4} {:.4}",
+                id.iterations,
+                if id.converged { ", converged" } else { ", not converged" },
+                id.samples_per_mode,
+                id.cost_start,
+                id.cost_end,
+                1e3 * id.rms_start[0],
+                1e3 * id.rms_end[0],
+                id.rms_start[1],
+                id.rms_end[1],
+                id.spectral_radius[0],
+                id.spectral_radius[1],
+                id.spectral_radius[2],
+            );
+        }
         let _ = writeln!(
             s,
             "{:<16} {:>6} {:>10} {:>10} {:>7} {:>6} {:>10} {:>10}   key",

@@ -110,6 +110,9 @@ enum Command {
         /// Length of the blocks whose maxima are fitted (s).
         #[arg(long, default_value_t = 10.0)]
         block_s: f64,
+        /// Keep the starting configuration's throttle model instead of re-identifying it.
+        #[arg(long)]
+        keep_model: bool,
     },
     /// Reproduce a result from one of the source papers.
     Reproduce {
@@ -267,6 +270,7 @@ fn run(command: Command) -> Result<()> {
             config,
             false_alarms_per_hour,
             block_s,
+            keep_model,
         } => {
             if !(false_alarms_per_hour > 0.0 && false_alarms_per_hour.is_finite()) {
                 anyhow::bail!(
@@ -280,6 +284,7 @@ fn run(command: Command) -> Result<()> {
             let opts = fdd::calibrate::CalibrateOptions {
                 false_alarms_per_hour,
                 block_s,
+                identify: !keep_model,
             };
             let cal = fdd::calibrate::calibrate(&inputs, &cfg, &opts)?;
             let written = cal.write(&out)?;

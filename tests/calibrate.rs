@@ -72,6 +72,23 @@ fn calibration_finds_the_noise_level_and_refuses_a_faulty_log() {
     }
     let throttle = std::fs::read_to_string(out_dir.join("throttle.toml")).expect("throttle.toml");
     let table: toml::Table = toml::from_str(&throttle).expect("valid TOML");
+    // The model was re-identified (this plant is Table I's own, so it may stay where it is):
+    // the identified model predicts the log no worse than Table I ("power a -> b").
+    assert!(text.contains("model re-identified"), "{text}");
+    let power: Vec<f64> = text
+        .split("innovation power ")
+        .nth(1)
+        .and_then(|s| s.split(';').next())
+        .map(|s| {
+            s.split(" -> ")
+                .filter_map(|v| v.trim().parse().ok())
+                .collect()
+        })
+        .unwrap_or_default();
+    assert!(
+        power.len() == 2 && power[1] <= power[0],
+        "{power:?}\n{text}"
+    );
     let monitor = table["monitor"].as_table().expect("[monitor]");
     let written = monitor["wattmeter_noise_w"].as_float().expect("noise key");
     assert!((written - watt).abs() < 1e-3, "{written} vs {watt}");

@@ -296,14 +296,14 @@ def heldout():
 
 
 def calibration():
-    """One plant beyond the default configuration's range (wattmeter noise 0.9 W against the
-    default's 0.8 W limit, Table I 2 % off, a restitution at the stops, sensor tolerances): a
+    """One plant beyond the default configuration's range (Table I 20 % off, against the 1.5 %
+    of the tuning set; wattmeter noise 0.6 W; a restitution at the stops, sensor tolerances): a
     30-minute fault-free log to calibrate on (`throttle_calibrate_train/`) and logs of the same
     plant (`plant.seed`) with other seeds, excitation styles and fault sizes 0.75-1.5x to judge
     the calibrated and the default configuration on (`throttle_calibrate_heldout/`)."""
-    rng = random.Random(22)
+    rng = random.Random(23)
     sensors = {
-        "wattmeter_noise_std_w": 0.9,
+        "wattmeter_noise_std_w": 0.6,
         "tps_noise_std_v": 0.008,
         "tps_gain": 1.01,
         "tps_offset_v": 0.01,
@@ -312,7 +312,7 @@ def calibration():
         "wattmeter_lag_s": 0.002,
     }
     plant = {
-        "table1_rel_error": 0.02,
+        "table1_rel_error": 0.2,
         "table1_max_draws": 1000,
         "stop_restitution": 0.2,
         "process_noise_scale": 1.0,
@@ -326,12 +326,13 @@ def calibration():
     held = []
     styles = ["pulse_train", "chirp", "pedal_ramps", "steady_holds", "idle_blips"]
     n = 0
-    # Version 2 (seeds 3200+, random.Random(22)): 20 fault-free drives of 30 min (10 h) and
-    # 9 fault kinds x 3. Version 1 (seeds 3100+, 2 drives and 9 x 2, random.Random(21)) was
-    # evaluated once and is retired.
+    # Version 3 (seeds 3300+, random.Random(23); the plant of the issue's example: Table I
+    # 20 % off, wattmeter 0.6 W): 20 fault-free drives of 30 min (10 h) and 9 fault kinds x 3.
+    # Version 2 (seeds 3200+, random.Random(22), Table I 2 %, wattmeter 0.9 W) and version 1
+    # (seeds 3100+, 2 drives and 9 x 2, random.Random(21)) were evaluated once and are retired.
     for i in range(20):
         name = "throttle_calibrate_heldout_%02d_nominal" % n
-        held.append((name, scenario(name, 3200 + n, 1800, {"kind": styles[n % len(styles)]},
+        held.append((name, scenario(name, 3300 + n, 1800, {"kind": styles[n % len(styles)]},
                                     sensors, plant, {"kind": "none"},
                                     comment="calibration held-out: 30 min fault-free")))
         n += 1
@@ -341,7 +342,7 @@ def calibration():
             scale = rng.uniform(0.75, 1.5)
             f = fault_table(rng, kind, start, scale)
             name = "throttle_calibrate_heldout_%02d_%s" % (n, kind)
-            held.append((name, scenario(name, 3200 + n, start + 60,
+            held.append((name, scenario(name, 3300 + n, start + 60,
                                         {"kind": styles[n % len(styles)]}, sensors, plant, f,
                                         comment="calibration held-out: %s from %g s, size x%.2f"
                                         % (kind, start, scale))))

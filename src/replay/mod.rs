@@ -301,7 +301,12 @@ impl Replayer<'_, '_> {
                 }
             };
             match rt.push(sig_ids[i], t, v) {
-                Ok(()) => sig[i].samples += 1,
+                Ok(()) => {
+                    sig[i].samples += 1;
+                    if let Some(obs) = sinks.observer.as_mut() {
+                        obs.sample(t, &s.name, v);
+                    }
+                }
                 Err(RuntimeError::Sample { source: e, .. }) => {
                     sig[i].rejected += 1;
                     problems.record(

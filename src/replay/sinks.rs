@@ -193,6 +193,9 @@ pub trait ReplayObserver {
         active: bool,
         observable: Option<bool>,
     );
+    /// A sample of runtime signal `signal` at `t_ns` that the runtime accepted (`fdd
+    /// calibrate` gathers the throttle's raw signals to re-identify its model).
+    fn sample(&mut self, _t_ns: u64, _signal: &str, _value: f64) {}
     /// The log ended.
     fn end_log(&mut self);
 }

@@ -3,3 +3,4 @@
 pub mod intake;
 pub mod linear;
 pub mod throttle;
+pub mod throttle_identification;
