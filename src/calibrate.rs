@@ -329,18 +329,22 @@ impl ReplayObserver for Collector {
     }
 }
 
+/// A TOML text as an editable document (comments kept), errors naming `origin`.
+fn parse_doc(text: &str, origin: &str) -> Result<toml_edit::DocumentMut, CalibrateError> {
+    text.parse()
+        .map_err(|e: toml_edit::TomlError| CalibrateError::Toml {
+            origin: origin.to_string(),
+            message: e.to_string(),
+        })
+}
+
 /// Sets `[monitor]` keys in a throttle configuration text (comments kept).
 fn with_monitor_keys(
     text: &str,
     origin: &str,
     keys: &[(&str, f64)],
 ) -> Result<String, CalibrateError> {
-    let mut doc: toml_edit::DocumentMut =
-        text.parse()
-            .map_err(|e: toml_edit::TomlError| CalibrateError::Toml {
-                origin: origin.to_string(),
-                message: e.to_string(),
-            })?;
+    let mut doc = parse_doc(text, origin)?;
     if doc.get("monitor").is_none() {
         doc["monitor"] = toml_edit::table();
     }
@@ -353,12 +357,7 @@ fn with_monitor_keys(
 /// Replaces the `[[model.modes]]` values in a throttle configuration text by the identified
 /// ones (comments kept).
 fn with_model(text: &str, origin: &str, id: &Identified) -> Result<String, CalibrateError> {
-    let mut doc: toml_edit::DocumentMut =
-        text.parse()
-            .map_err(|e: toml_edit::TomlError| CalibrateError::Toml {
-                origin: origin.to_string(),
-                message: e.to_string(),
-            })?;
+    let mut doc = parse_doc(text, origin)?;
     let modes = doc
         .get_mut("model")
         .and_then(|m| m.get_mut("modes"))

@@ -134,7 +134,8 @@ pub fn mode_index(params: &ThrottleParams, theta_deg: f64) -> usize {
     }
 }
 
-fn sgn(v: f64) -> f64 {
+/// `sgn` of the model's sign terms: 0 at 0.
+pub(crate) fn sgn(v: f64) -> f64 {
     if v > 0.0 {
         1.0
     } else if v < 0.0 {
@@ -239,17 +240,26 @@ impl ThrottleModel {
     }
 }
 
-impl TransitionModel<3, 1> for ThrottleModel {
+impl ThrottleModel {
+    /// The transition (before the stops) in mode `mode`, which the caller has taken from the
+    /// angle (the identification needs the mode for its sensitivities too).
     #[inline]
-    fn transition(&self, x: &Vector3<f64>, u: &Vector1<f64>) -> Vector3<f64> {
+    pub fn transition_in(&self, x: &Vector3<f64>, u: f64, mode: usize) -> Vector3<f64> {
         let theta = self.angle_deg(x);
-        let m = &self.params.modes[mode_index(&self.params, theta)];
+        let m = &self.params.modes[mode];
         let drift = m.c1 * sgn(x[1]) + m.c2 * sgn(theta - self.params.friction_switch_deg) + m.c3;
         Vector3::new(
             x[0] + m.a12 * x[1],
             m.a21 * x[0] + m.a22 * x[1] + m.a23 * x[2] + drift,
-            m.a32 * x[1] + m.a33 * x[2] + m.b * u[0],
+            m.a32 * x[1] + m.a33 * x[2] + m.b * u,
         )
+    }
+}
+
+impl TransitionModel<3, 1> for ThrottleModel {
+    #[inline]
+    fn transition(&self, x: &Vector3<f64>, u: &Vector1<f64>) -> Vector3<f64> {
+        self.transition_in(x, u[0], mode_index(&self.params, self.angle_deg(x)))
     }
 
     /// `A_s` of the active mode: the sign terms are piecewise constant, so their derivative is

@@ -34,7 +34,7 @@
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
-use super::throttle::{mode_index, ThrottleModel, ThrottleParams};
+use super::throttle::{mode_index, sgn, ThrottleModel, ThrottleParams};
 
 /// Number of identified values (9 per mode).
 pub const IDENTIFIED: usize = 27;
@@ -171,16 +171,6 @@ pub fn spectral_radii(p: &ThrottleParams) -> [f64; 3] {
     r
 }
 
-fn sgn(v: f64) -> f64 {
-    if v > 0.0 {
-        1.0
-    } else if v < 0.0 {
-        -1.0
-    } else {
-        0.0
-    }
-}
-
 /// One pass of the filter over every record: the cost and, with `normal`, the Gauss-Newton
 /// normal equations (`J'J`, `J'r`) in the relative parameters.
 struct Pass {
@@ -300,7 +290,7 @@ fn run(
                 }
                 psi = a * psi + dfdp;
             }
-            let mut xn = model.transition_at(&x, smp.u_v, mode);
+            let mut xn = model.transition_in(&x, smp.u_v, mode);
             if xn[0] < lo || xn[0] > hi {
                 xn[0] = xn[0].clamp(lo, hi);
                 xn[1] = 0.0;
@@ -317,21 +307,6 @@ fn run(
         }
     }
     out.sum_sq.is_finite().then_some(out)
-}
-
-impl ThrottleModel {
-    /// The transition in a given mode (the mode of the angle, which the caller has computed).
-    fn transition_at(&self, x: &Vector3<f64>, u: f64, mode: usize) -> Vector3<f64> {
-        let p = self.params();
-        let m = &p.modes[mode];
-        let theta = x[0] / p.angle_scale;
-        let drift = m.c1 * sgn(x[1]) + m.c2 * sgn(theta - p.friction_switch_deg) + m.c3;
-        Vector3::new(
-            x[0] + m.a12 * x[1],
-            m.a21 * x[0] + m.a22 * x[1] + m.a23 * x[2] + drift,
-            m.a32 * x[1] + m.a33 * x[2] + m.b * u,
-        )
-    }
 }
 
 /// Identifies the throttle model from fault-free `records` (each a contiguous run of 1 ms
