@@ -127,7 +127,8 @@ pub struct ThrottleMonitorConfig {
     /// rare mode-switch outliers).
     pub cusum_clip_sigma: f64,
     /// After the first test fails, the monitor waits this long for the other tests before it
-    /// names the fault (s).
+    /// names the fault (s). The drift rule (the TPS away from the wattmeter-only angle) also
+    /// needs the disagreement to hold this long.
     pub decision_window_s: f64,
     /// Plate-stuck test: over `motion_window_s`, the TPS spans less than
     /// `static_tps_range_deg` while the static map of the applied voltage spans more than

@@ -269,6 +269,13 @@ pub struct ThrottleMonitor {
     /// make that a rail fault (`watt_rail_persist_s`).
     watt_rail_run: u32,
     watt_rail_persist: u32,
+    /// Samples in a row in which the TPS disagrees with the wattmeter-only filter's angle
+    /// ([`Self::tps_disagrees_with_wattmeter`]), and how many the drift rule needs
+    /// (`decision_window_s`): that filter lags a fast plate move by up to about 0.15 s (a
+    /// full-range swing onto the open stop, retired held-out version 5, log 53), and a
+    /// disagreement that short is its lag, not the TPS's.
+    disagree_run: u32,
+    disagree_persist: u32,
     rail_low_run: u32,
     rail_high_run: u32,
     /// A TPS circuit fault healed in this operation cycle on rail readings the estimate could
@@ -278,6 +285,9 @@ pub struct ThrottleMonitor {
     rail_fault_healed: bool,
     dropouts: Ring,
     frozen_run: u32,
+    /// Consecutive TPS readings at a rail (at or beyond `rail_low_v` / `rail_high_v`),
+    /// ruled out or not.
+    at_rail_run: u32,
     last_tps: f64,
     first_fail_s: Option<f64>,
     /// Residual tests that failed in this episode: TPS NIS window, TPS CUSUM, wattmeter
@@ -524,12 +534,15 @@ impl ThrottleMonitor {
             eq_hist: SpanWindow::new(motion),
             rail_persist: ((cfg.rail_persist_s / cfg.period_s).round() as u32).max(1),
             watt_rail_run: 0,
+            disagree_run: 0,
+            disagree_persist: ((cfg.decision_window_s / cfg.period_s).round() as u32).max(1),
             watt_rail_persist: ((cfg.watt_rail_persist_s / cfg.period_s).round() as u32).max(1),
             rail_low_run: 0,
             rail_high_run: 0,
             rail_fault_healed: false,
             dropouts: Ring::new(cfg.intermittent_count),
             frozen_run: 0,
+            at_rail_run: 0,
             last_tps: f64::NAN,
             first_fail_s: None,
             fired: [false; 4],
@@ -628,6 +641,7 @@ impl ThrottleMonitor {
         self.rail_high_run = 0;
         self.rail_fault_healed = false;
         self.watt_rail_run = 0;
+        self.disagree_run = 0;
     }
 
     /// Puts the noise estimates into the filters' `R` every [`NOISE_UPDATE_STEPS`] steps once
@@ -685,8 +699,10 @@ impl ThrottleMonitor {
     /// `driven_range_deg`, or holds the plate that far from the TPS angle.
     fn static_while_driven(&self) -> bool {
         // A TPS at a rail (an open or shorted line reads like a plate at its stop) is left to
-        // the circuit checks.
-        if !(self.last_tps > self.cfg.rail_low_v && self.last_tps < self.cfg.rail_high_v) {
+        // the circuit checks. At a rail means for `rail_persist_s` in a row: a healthy TPS a
+        // little offset at a stop dips into the rail band now and then by its noise, and a
+        // plate stuck at that stop must not escape the test by it.
+        if self.at_rail_run >= self.rail_persist {
             return false;
         }
         let static_tps =
@@ -755,7 +771,7 @@ impl ThrottleMonitor {
                 if watt_only {
                     return Some(ThrottleFault::Wattmeter);
                 }
-                if self.tps_disagrees_with_wattmeter() {
+                if self.disagree_run >= self.disagree_persist {
                     return Some(ThrottleFault::TpsPerformance);
                 }
             }
@@ -960,19 +976,34 @@ impl ThrottleMonitor {
         // DTC's testFailed clears; pending and confirmed follow the event memory's rules).
         let quiet = |r: &TestResult| matches!(r.verdict, Verdict::Passed | Verdict::PrePassed);
         if let Some(d) = self.tps_fault {
+            // The TPS agrees with the combined filter, which runs without it while it is
+            // failed (on the model and the wattmeter).
+            let x = self.both_ukf.state();
+            let sigma = self.both_ukf.covariance()[(0, 0)].max(0.0).sqrt()
+                / self.model.params().angle_scale;
+            let agrees = tps.is_some_and(|v| {
+                (v / self.volts_per_deg - self.model.angle_deg(x)).abs()
+                    <= self.cfg.heal_agreement_deg + 2.0 * sigma
+            });
             let ok = match d.fault {
                 // A circuit fault heals on readings off the rails, or on rail readings that the
                 // wattmeter estimate does not rule out (the plate at that stop). Without the
                 // wattmeter the model alone cannot tell a plate at its stop from a line still
                 // open.
+                // Off-rail readings must also agree with the wattmeter estimate where there is
+                // one: a drift that clipped at a rail and comes back is still wrong.
                 ThrottleFault::TpsOpen | ThrottleFault::TpsShort => tps.is_some_and(|v| {
-                    (v > self.cfg.rail_low_v && v < self.cfg.rail_high_v)
+                    (v > self.cfg.rail_low_v
+                        && v < self.cfg.rail_high_v
+                        && (agrees || self.watt_fault.is_some()))
                         || (self.watt_fault.is_none()
+                            && (v <= self.cfg.rail_low_v || v >= self.cfg.rail_high_v)
                             && self.rail_low_run == 0
                             && self.rail_high_run == 0)
                 }),
                 ThrottleFault::TpsIntermittent => {
                     tps.is_some()
+                        && (agrees || self.watt_fault.is_some())
                         && self.rail_low_run == 0
                         && self.rail_high_run == 0
                         && self
@@ -984,13 +1015,6 @@ impl ThrottleMonitor {
                 // with the wattmeter estimate again: the TPS filter absorbs a drift or a bias
                 // that stays, so its tests alone would heal a fault still present.
                 _ => {
-                    let x = self.both_ukf.state();
-                    let sigma = self.both_ukf.covariance()[(0, 0)].max(0.0).sqrt()
-                        / self.model.params().angle_scale;
-                    let agrees = tps.is_some_and(|v| {
-                        (v / self.volts_per_deg - self.model.angle_deg(x)).abs()
-                            <= self.cfg.heal_agreement_deg + 2.0 * sigma
-                    });
                     self.frozen_run < self.cfg.frozen_samples
                         && agrees
                         && quiet(&results[0])
@@ -1132,6 +1156,11 @@ impl Monitor for ThrottleMonitor {
             // A reading clipped at an ADC end repeats while the plate rests on that stop
             // (a TPS a percent high reads 5 V at the open stop): not a frozen signal.
             let inside = v > self.cfg.rail_low_v && v < self.cfg.rail_high_v;
+            self.at_rail_run = if inside {
+                0
+            } else {
+                self.at_rail_run.saturating_add(1)
+            };
             self.frozen_run = if inside && v == self.last_tps {
                 self.frozen_run + 1
             } else {
@@ -1139,6 +1168,14 @@ impl Monitor for ThrottleMonitor {
             };
             self.last_tps = v;
             self.tps_hist.push(v / self.volts_per_deg);
+            self.disagree_run = if self.watt_fault.is_none() && self.tps_disagrees_with_wattmeter()
+            {
+                self.disagree_run.saturating_add(1)
+            } else {
+                0
+            };
+        } else {
+            self.disagree_run = 0;
         }
         for (run, now_rail) in [
             (&mut self.rail_low_run, rail_low),
