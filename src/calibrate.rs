@@ -39,6 +39,8 @@ use fdd_monitor::monitor::Output;
 use fdd_monitor::runtime::config::TruthConfig;
 use fdd_monitor::runtime::Runtime;
 
+pub mod intake;
+
 use crate::evaluate::expand_inputs;
 use crate::replay::{replay_observed, ReplayObserver, ReplayOptions, RuntimeConfig};
 
@@ -113,6 +115,12 @@ pub enum CalibrateError {
         t_s: f64,
         rate: f64,
     },
+    #[error("{}: cannot read: {source}", file.display())]
+    Read {
+        file: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("{}: cannot write: {source}", file.display())]
     Write {
         file: PathBuf,
@@ -121,6 +129,10 @@ pub enum CalibrateError {
     },
     #[error("{origin}: {message}")]
     Toml { origin: String, message: String },
+    #[error("{}: {message}", file.display())]
+    Monitor { file: PathBuf, message: String },
+    #[error("monitor `{0}`: fdd calibrate knows `throttle` and `intake`")]
+    UnknownMonitor(String),
     #[error("re-identifying the throttle model: {0}")]
     Identify(#[from] IdentifyError),
     #[error("re-identifying the throttle model: {incomplete} of the logs' timestamps lack one of the signals {IDENTIFICATION_SIGNALS:?} (the identification needs the three sampled together)")]
@@ -271,19 +283,12 @@ impl ReplayObserver for Collector {
                 let Some(i) = TESTS.iter().position(|(t, _)| *t == test) else {
                     return;
                 };
-                if !result.value.is_finite() {
-                    return;
-                }
-                match &mut self.current[i] {
-                    Some((start, m)) if t_ns < *start + self.block_ns => *m = m.max(result.value),
-                    slot => {
-                        // Only whole blocks count: a block ends when the next one starts.
-                        if let Some((start, m)) = slot.take() {
-                            self.maxima[i].push((m, self.log_index, start as f64 * 1e-9));
-                        }
-                        *slot = Some((t_ns, result.value));
-                    }
-                }
+                block_max(
+                    &mut self.current[i],
+                    &mut self.maxima[i],
+                    (t_ns, self.block_ns, self.log_index),
+                    result.value,
+                );
             }
             Output::Innovation {
                 filter: "combined",
@@ -330,7 +335,10 @@ impl ReplayObserver for Collector {
 }
 
 /// A TOML text as an editable document (comments kept), errors naming `origin`.
-fn parse_doc(text: &str, origin: &str) -> Result<toml_edit::DocumentMut, CalibrateError> {
+pub(crate) fn parse_doc(
+    text: &str,
+    origin: &str,
+) -> Result<toml_edit::DocumentMut, CalibrateError> {
     text.parse()
         .map_err(|e: toml_edit::TomlError| CalibrateError::Toml {
             origin: origin.to_string(),
@@ -338,8 +346,8 @@ fn parse_doc(text: &str, origin: &str) -> Result<toml_edit::DocumentMut, Calibra
         })
 }
 
-/// Sets `[monitor]` keys in a throttle configuration text (comments kept).
-fn with_monitor_keys(
+/// Sets `[monitor]` keys in a monitor configuration text (comments kept).
+pub(crate) fn with_monitor_keys(
     text: &str,
     origin: &str,
     keys: &[(&str, f64)],
@@ -378,6 +386,186 @@ fn with_model(text: &str, origin: &str, id: &Identified) -> Result<String, Calib
     Ok(doc.to_string())
 }
 
+/// Refuses a rate that asks to extrapolate more than [`MAX_EXTRAPOLATION`] times beyond
+/// `hours` of data.
+pub(crate) fn check_extrapolation(
+    hours: f64,
+    opts: &CalibrateOptions,
+) -> Result<(), CalibrateError> {
+    let ratio = 1.0 / (opts.false_alarms_per_hour * hours);
+    if ratio <= MAX_EXTRAPOLATION {
+        Ok(())
+    } else {
+        Err(CalibrateError::Extrapolation {
+            rate: opts.false_alarms_per_hour,
+            hours,
+            ratio,
+        })
+    }
+}
+
+/// One test's threshold from its block maxima `(value, log index, block start s)`: the
+/// extreme-value fit, its check, and the value a block maximum exceeds at the rate asked.
+pub(crate) fn fit_threshold(
+    test: &'static str,
+    key: &'static str,
+    maxima: &[(f64, usize, f64)],
+    logs: &[PathBuf],
+    hours: f64,
+    opts: &CalibrateOptions,
+) -> Result<TestCalibration, CalibrateError> {
+    if maxima.is_empty() {
+        return Err(CalibrateError::NoData(test));
+    }
+    let values: Vec<f64> = maxima.iter().map(|m| m.0).collect();
+    let fit = GevFit::fit(&values).map_err(|source| CalibrateError::TooShort {
+        test,
+        hours,
+        block_s: opts.block_s,
+        source,
+    })?;
+    let (max, log, t_s) = maxima
+        .iter()
+        .copied()
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .unwrap_or((f64::NAN, 0, f64::NAN));
+    let file = logs.get(log).cloned().unwrap_or_default();
+    if !(fit.ppcc >= MIN_PPCC) {
+        return Err(CalibrateError::BadFit {
+            test,
+            ppcc: fit.ppcc,
+            max,
+            file,
+            t_s,
+        });
+    }
+    let threshold = fit.threshold(opts.false_alarms_per_hour, opts.block_s);
+    if max > threshold {
+        return Err(CalibrateError::Exceeds {
+            test,
+            max,
+            threshold,
+            file,
+            t_s,
+            rate: opts.false_alarms_per_hour,
+        });
+    }
+    Ok(TestCalibration {
+        test,
+        key,
+        fit,
+        max,
+        threshold,
+    })
+}
+
+/// Takes `value` at `(t_ns, block length ns, log index)` into the open block `slot`; a block
+/// that ends (when the next one starts: only whole blocks count) goes into `maxima` as
+/// `(its maximum, log index, start s)`. A value that is not finite is left out.
+pub(crate) fn block_max(
+    slot: &mut Option<(u64, f64)>,
+    maxima: &mut Vec<(f64, usize, f64)>,
+    (t_ns, block_ns, log): (u64, u64, usize),
+    value: f64,
+) {
+    if !value.is_finite() {
+        return;
+    }
+    match slot {
+        Some((start, m)) if t_ns < *start + block_ns => *m = m.max(value),
+        _ => {
+            if let Some((start, m)) = slot.take() {
+                maxima.push((m, log, start as f64 * 1e-9));
+            }
+            *slot = Some((t_ns, value));
+        }
+    }
+}
+
+/// A monitor configuration's text and origin: the file `path`, or the embedded `default`.
+pub(crate) fn monitor_text(
+    path: Option<&Path>,
+    default: &str,
+    default_origin: &str,
+) -> Result<(String, String), CalibrateError> {
+    match path {
+        Some(p) => Ok((
+            std::fs::read_to_string(p).map_err(|source| CalibrateError::Read {
+                file: p.to_path_buf(),
+                source,
+            })?,
+            p.display().to_string(),
+        )),
+        None => Ok((default.to_string(), default_origin.to_string())),
+    }
+}
+
+/// Refuses `file` when its ground truth had `fault` (name, onset s) active.
+pub(crate) fn refuse_fault(
+    file: &Path,
+    fault: Option<(String, f64)>,
+) -> Result<(), CalibrateError> {
+    match fault {
+        Some((fault, t_s)) => Err(CalibrateError::FaultInLog {
+            file: file.to_path_buf(),
+            fault,
+            t_s,
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Replays one input (an MCAP log, or a scenario file simulated into a temporary log) through
+/// `cfg` with `observer`.
+pub(crate) fn replay_input(
+    file: &Path,
+    cfg: &RuntimeConfig,
+    observer: &mut dyn ReplayObserver,
+) -> Result<(), CalibrateError> {
+    let opts = ReplayOptions::default();
+    if file.extension().and_then(|e| e.to_str()) == Some("toml") {
+        let tmp = tempfile::Builder::new()
+            .prefix("fdd-calibrate-")
+            .suffix(".mcap")
+            .tempfile()
+            .map_err(crate::evaluate::EvaluateError::Temp)?;
+        crate::simulate::simulate(&file.to_string_lossy(), tmp.path()).map_err(|source| {
+            crate::evaluate::EvaluateError::Simulate {
+                file: file.to_path_buf(),
+                source: Box::new(source),
+            }
+        })?;
+        replay_observed(tmp.path(), cfg, &opts, observer)?;
+    } else {
+        replay_observed(file, cfg, &opts, observer)?;
+    }
+    Ok(())
+}
+
+/// The runtime configuration `fdd calibrate` writes: the starting one (a file, or the embedded
+/// default) with `[monitors] key = file` naming the calibrated monitor configuration beside it.
+pub(crate) fn runtime_naming(
+    base: &RuntimeConfig,
+    key: &str,
+    file: &str,
+) -> Result<String, CalibrateError> {
+    let runtime_text = match base.origin.as_str() {
+        o if Path::new(o).is_file() => {
+            std::fs::read_to_string(o).map_err(|source| CalibrateError::Read {
+                file: o.into(),
+                source,
+            })?
+        }
+        _ => fdd_monitor::runtime::config::DEFAULT_RUNTIME_TOML.to_string(),
+    };
+    let mut doc = parse_doc(&runtime_text, &base.origin)?;
+    if doc.get("monitors").is_none() {
+        doc["monitors"] = toml_edit::table();
+    }
+    doc["monitors"][key] = toml_edit::value(file);
+    Ok(doc.to_string())
+}
+
 /// Runs every log through the runtime of `cfg` with `collector`.
 fn pass(
     logs: &[PathBuf],
@@ -394,31 +582,9 @@ fn pass(
         c.log_index = i;
         c.file = file.clone();
         c.fault = None;
-        let opts = ReplayOptions::default();
-        if file.extension().and_then(|e| e.to_str()) == Some("toml") {
-            let tmp = tempfile::Builder::new()
-                .prefix("fdd-calibrate-")
-                .suffix(".mcap")
-                .tempfile()
-                .map_err(crate::evaluate::EvaluateError::Temp)?;
-            crate::simulate::simulate(&file.to_string_lossy(), tmp.path()).map_err(|source| {
-                crate::evaluate::EvaluateError::Simulate {
-                    file: file.clone(),
-                    source: Box::new(source),
-                }
-            })?;
-            replay_observed(tmp.path(), cfg, &opts, &mut c)?;
-        } else {
-            replay_observed(file, cfg, &opts, &mut c)?;
-        }
+        replay_input(file, cfg, &mut c)?;
         c.flush();
-        if let Some((fault, t_s)) = c.fault.take() {
-            return Err(CalibrateError::FaultInLog {
-                file: file.clone(),
-                fault,
-                t_s,
-            });
-        }
+        refuse_fault(file, c.fault.take())?;
     }
     Ok(c)
 }
@@ -441,7 +607,7 @@ fn runtime_with(
     Ok(cfg)
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
+pub(crate) fn median(mut v: Vec<f64>) -> f64 {
     v.retain(|x| x.is_finite());
     v.sort_by(f64::total_cmp);
     if v.is_empty() {
@@ -458,19 +624,11 @@ pub fn calibrate(
     opts: &CalibrateOptions,
 ) -> Result<Calibration, CalibrateError> {
     let logs = expand_inputs(inputs)?;
-    let (throttle_text, throttle_origin) = match &base.monitors.throttle_config {
-        Some(p) => (
-            std::fs::read_to_string(p).map_err(|source| CalibrateError::Write {
-                file: p.clone(),
-                source,
-            })?,
-            p.display().to_string(),
-        ),
-        None => (
-            fdd_monitor::config::DEFAULT_THROTTLE_TOML.to_string(),
-            "config/throttle.toml".to_string(),
-        ),
-    };
+    let (throttle_text, throttle_origin) = monitor_text(
+        base.monitors.throttle_config.as_deref(),
+        fdd_monitor::config::DEFAULT_THROTTLE_TOML,
+        "config/throttle.toml",
+    )?;
     let work = tempfile::tempdir().map_err(crate::evaluate::EvaluateError::Temp)?;
     let unreachable = [
         ("tps_nis_threshold", UNREACHABLE_NIS),
@@ -569,60 +727,10 @@ pub fn calibrate(
     let cfg = runtime_with(base, work.path(), &text)?;
     let c = pass(&logs, &cfg, opts.block_s, false)?;
     let hours = c.total_ns as f64 * 1e-9 / 3600.0;
-    let ratio = 1.0 / (opts.false_alarms_per_hour * hours);
-    if !(ratio <= MAX_EXTRAPOLATION) {
-        return Err(CalibrateError::Extrapolation {
-            rate: opts.false_alarms_per_hour,
-            hours,
-            ratio,
-        });
-    }
+    check_extrapolation(hours, opts)?;
     let mut tests = Vec::new();
     for (i, (test, key)) in TESTS.iter().enumerate() {
-        let maxima = &c.maxima[i];
-        if maxima.is_empty() {
-            return Err(CalibrateError::NoData(test));
-        }
-        let values: Vec<f64> = maxima.iter().map(|m| m.0).collect();
-        let fit = GevFit::fit(&values).map_err(|source| CalibrateError::TooShort {
-            test,
-            hours,
-            block_s: opts.block_s,
-            source,
-        })?;
-        let (max, log, t_s) = maxima
-            .iter()
-            .copied()
-            .max_by(|a, b| a.0.total_cmp(&b.0))
-            .unwrap_or((f64::NAN, 0, f64::NAN));
-        let file = logs.get(log).cloned().unwrap_or_default();
-        if !(fit.ppcc >= MIN_PPCC) {
-            return Err(CalibrateError::BadFit {
-                test,
-                ppcc: fit.ppcc,
-                max,
-                file,
-                t_s,
-            });
-        }
-        let threshold = fit.threshold(opts.false_alarms_per_hour, opts.block_s);
-        if max > threshold {
-            return Err(CalibrateError::Exceeds {
-                test,
-                max,
-                threshold,
-                file,
-                t_s,
-                rate: opts.false_alarms_per_hour,
-            });
-        }
-        tests.push(TestCalibration {
-            test,
-            key,
-            fit,
-            max,
-            threshold,
-        });
+        tests.push(fit_threshold(test, key, &c.maxima[i], &logs, hours, opts)?);
     }
     let mut keys: Vec<(&str, f64)> = noise_keys.to_vec();
     keys.extend(tests.iter().map(|t| (t.key, t.threshold)));
@@ -634,26 +742,7 @@ pub fn calibrate(
         keys.push(("watt_only_cusum_threshold", t.threshold));
     }
     let throttle_toml = with_monitor_keys(&throttle_text, &throttle_origin, &keys)?;
-    let runtime_text = match base.origin.as_str() {
-        o if Path::new(o).is_file() => {
-            std::fs::read_to_string(o).map_err(|source| CalibrateError::Write {
-                file: o.into(),
-                source,
-            })?
-        }
-        _ => fdd_monitor::runtime::config::DEFAULT_RUNTIME_TOML.to_string(),
-    };
-    let mut doc: toml_edit::DocumentMut =
-        runtime_text
-            .parse()
-            .map_err(|e: toml_edit::TomlError| CalibrateError::Toml {
-                origin: base.origin.clone(),
-                message: e.to_string(),
-            })?;
-    if doc.get("monitors").is_none() {
-        doc["monitors"] = toml_edit::table();
-    }
-    doc["monitors"]["throttle_config"] = toml_edit::value("throttle.toml");
+    let runtime_toml = runtime_naming(base, "throttle_config", "throttle.toml")?;
     Ok(Calibration {
         logs,
         hours,
@@ -662,7 +751,7 @@ pub fn calibrate(
         watt_model_error_w,
         tests,
         throttle_toml,
-        runtime_toml: doc.to_string(),
+        runtime_toml,
         identified,
     })
 }
@@ -671,32 +760,19 @@ impl Calibration {
     /// Writes `dir/fdd.toml` (the runtime configuration, naming `throttle.toml` beside it) and
     /// `dir/throttle.toml`.
     pub fn write(&self, dir: &Path) -> Result<PathBuf, CalibrateError> {
-        std::fs::create_dir_all(dir).map_err(|source| CalibrateError::Write {
-            file: dir.to_path_buf(),
-            source,
-        })?;
-        for (name, text) in [
-            ("throttle.toml", &self.throttle_toml),
-            ("fdd.toml", &self.runtime_toml),
-        ] {
-            let p = dir.join(name);
-            std::fs::write(&p, text).map_err(|source| CalibrateError::Write { file: p, source })?;
-        }
-        Ok(dir.join("fdd.toml"))
+        write_files(
+            dir,
+            &[
+                ("throttle.toml", &self.throttle_toml),
+                ("fdd.toml", &self.runtime_toml),
+            ],
+        )
     }
 
     /// The report `fdd calibrate` prints.
     pub fn render(&self, opts: &CalibrateOptions) -> String {
         use std::fmt::Write as _;
-        let mut s = String::new();
-        let _ = writeln!(
-            s,
-            "{} logs, {:.2} h; blocks of {} s; {} false alarms per hour per test",
-            self.logs.len(),
-            self.hours,
-            opts.block_s,
-            opts.false_alarms_per_hour
-        );
+        let mut s = header(self.logs.len(), self.hours, opts);
         let _ = writeln!(
             s,
             "noise: TPS {:.2} mV, wattmeter {:.3} W (std, online estimate, median over the logs); wattmeter model error {:.3} W",
@@ -722,26 +798,169 @@ impl Calibration {
                 id.spectral_radius[2],
             );
         }
-        let _ = writeln!(
-            s,
-            "{:<16} {:>6} {:>10} {:>10} {:>7} {:>6} {:>10} {:>10}   key",
-            "test", "blocks", "location", "scale", "shape", "PPCC", "max seen", "threshold"
-        );
-        for t in &self.tests {
-            let _ = writeln!(
-                s,
-                "{:<16} {:>6} {:>10.4} {:>10.4} {:>7.3} {:>6.3} {:>10.4} {:>10.4}   {}",
-                t.test,
-                t.fit.blocks,
-                t.fit.location,
-                t.fit.scale,
-                t.fit.shape,
-                t.fit.ppcc,
-                t.max,
-                t.threshold,
-                t.key
-            );
-        }
+        render_tests(&mut s, &self.tests);
         s
+    }
+}
+
+/// The table of the calibrated tests: each fit and threshold.
+fn render_tests(s: &mut String, tests: &[TestCalibration]) {
+    use std::fmt::Write as _;
+    let w = tests
+        .iter()
+        .map(|t| t.test.len())
+        .max()
+        .unwrap_or(0)
+        .max(16);
+    let _ = writeln!(
+        *s,
+        "{:<w$} {:>6} {:>10} {:>10} {:>7} {:>6} {:>10} {:>10}   key",
+        "test", "blocks", "location", "scale", "shape", "PPCC", "max seen", "threshold"
+    );
+    for t in tests {
+        let _ = writeln!(
+            *s,
+            "{:<w$} {:>6} {:>10.4} {:>10.4} {:>7.3} {:>6.3} {:>10.4} {:>10.4}   {}",
+            t.test,
+            t.fit.blocks,
+            t.fit.location,
+            t.fit.scale,
+            t.fit.shape,
+            t.fit.ppcc,
+            t.max,
+            t.threshold,
+            t.key
+        );
+    }
+}
+
+/// The report's first line: the data and what was asked.
+fn header(logs: usize, hours: f64, opts: &CalibrateOptions) -> String {
+    format!(
+        "{logs} logs, {hours:.2} h; blocks of {} s; {} false alarms per hour per test\n",
+        opts.block_s, opts.false_alarms_per_hour
+    )
+}
+
+/// A calibration of one monitor.
+#[derive(Debug, Clone)]
+pub enum Calibrated {
+    Throttle(Box<Calibration>),
+    Intake(Box<intake::IntakeCalibration>),
+}
+
+impl Calibrated {
+    /// Writes `dir/fdd.toml` (the runtime configuration, naming the monitor's file beside it)
+    /// and that file (`throttle.toml` or `intake.toml`); returns the path of `fdd.toml`.
+    pub fn write(&self, dir: &Path) -> Result<PathBuf, CalibrateError> {
+        match self {
+            Calibrated::Throttle(c) => c.write(dir),
+            Calibrated::Intake(c) => write_files(
+                dir,
+                &[
+                    ("intake.toml", &c.intake_toml),
+                    ("fdd.toml", &c.runtime_toml),
+                ],
+            ),
+        }
+    }
+
+    /// The report `fdd calibrate` prints.
+    pub fn render(&self, opts: &CalibrateOptions) -> String {
+        match self {
+            Calibrated::Throttle(c) => c.render(opts),
+            Calibrated::Intake(c) => {
+                let mut s = header(c.logs.len(), c.hours, opts);
+                c.render_body(&mut s);
+                render_tests(&mut s, &c.tests);
+                s
+            }
+        }
+    }
+}
+
+/// Writes `files` (name, text) into `dir` (created); returns the path of `dir/fdd.toml`.
+fn write_files(dir: &Path, files: &[(&str, &String)]) -> Result<PathBuf, CalibrateError> {
+    std::fs::create_dir_all(dir).map_err(|source| CalibrateError::Write {
+        file: dir.to_path_buf(),
+        source,
+    })?;
+    for (name, text) in files {
+        let p = dir.join(name);
+        std::fs::write(&p, text).map_err(|source| CalibrateError::Write { file: p, source })?;
+    }
+    Ok(dir.join("fdd.toml"))
+}
+
+/// The monitor a calibration input is for: a scenario file's `monitor` key, or the monitor
+/// that would run on a log (exactly one).
+fn input_monitor(file: &Path, base: &RuntimeConfig) -> Result<String, CalibrateError> {
+    let refuse = |message: String| CalibrateError::Monitor {
+        file: file.to_path_buf(),
+        message,
+    };
+    if file.extension().and_then(|e| e.to_str()) == Some("toml") {
+        let text = std::fs::read_to_string(file).map_err(|source| CalibrateError::Read {
+            file: file.to_path_buf(),
+            source,
+        })?;
+        let doc = parse_doc(&text, &file.display().to_string())?;
+        return doc
+            .get("monitor")
+            .and_then(|m| m.as_str())
+            .map(str::to_string)
+            .ok_or_else(|| refuse("the scenario has no `monitor` key".into()));
+    }
+    let run = crate::replay::monitors_on_log(file, base)?;
+    match run.as_slice() {
+        [one] => Ok(one.clone()),
+        _ => Err(refuse(format!(
+            "calibrates one monitor at a time, and the log feeds {} ({}); name one with --monitor",
+            run.len(),
+            run.join(", ")
+        ))),
+    }
+}
+
+/// Calibrates `monitor` (`None`: the one the inputs are for) on `inputs` (fault-free logs,
+/// scenario files or directories of either).
+pub fn calibrate_inputs(
+    inputs: &[PathBuf],
+    base: &RuntimeConfig,
+    opts: &CalibrateOptions,
+    monitor: Option<&str>,
+) -> Result<Calibrated, CalibrateError> {
+    let logs = expand_inputs(inputs)?;
+    let monitor = match monitor {
+        Some(m) => m.to_string(),
+        None => {
+            let mut found: Option<(String, PathBuf)> = None;
+            for log in &logs {
+                let m = input_monitor(log, base)?;
+                match &found {
+                    None => found = Some((m, log.clone())),
+                    Some((first, first_log)) if *first != m => {
+                        return Err(CalibrateError::Monitor {
+                            file: log.clone(),
+                            message: format!(
+                                "is for the {m} monitor, {} for the {first} monitor; calibrate one monitor at a time",
+                                first_log.display()
+                            ),
+                        });
+                    }
+                    Some(_) => {}
+                }
+            }
+            found.map(|f| f.0).unwrap_or_else(|| "throttle".into())
+        }
+    };
+    match monitor.as_str() {
+        "throttle" => Ok(Calibrated::Throttle(Box::new(calibrate(
+            &logs, base, opts,
+        )?))),
+        "intake" => Ok(Calibrated::Intake(Box::new(intake::calibrate(
+            logs, base, opts,
+        )?))),
+        other => Err(CalibrateError::UnknownMonitor(other.to_string())),
     }
 }

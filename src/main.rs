@@ -90,9 +90,10 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Calibrate the throttle monitor on fault-free logs of one plant: its sensors' noise
-    /// levels and every residual test's threshold for a false-alarm rate (extreme-value fit to
-    /// block maxima). Writes DIR/fdd.toml and DIR/throttle.toml for `fdd replay --config
+    /// Calibrate the throttle or the intake monitor on fault-free logs of one plant: its
+    /// sensors' noise levels, its model (throttle) or correction range (intake), and every
+    /// residual test's threshold for a false-alarm rate (extreme-value fit to block maxima).
+    /// Writes DIR/fdd.toml and DIR/throttle.toml or DIR/intake.toml for `fdd replay --config
     /// DIR/fdd.toml`. Refuses logs with a fault in them, or too short for the rate asked.
     Calibrate {
         /// Fault-free logs, scenario files or directories.
@@ -113,6 +114,10 @@ enum Command {
         /// Keep the starting configuration's throttle model instead of re-identifying it.
         #[arg(long)]
         keep_model: bool,
+        /// The monitor to calibrate (`throttle` or `intake`); default: the one the inputs are
+        /// for (a scenario's `monitor` key, the monitor whose topics a log carries).
+        #[arg(long)]
+        monitor: Option<String>,
     },
     /// Reproduce a result from one of the source papers.
     Reproduce {
@@ -271,6 +276,7 @@ fn run(command: Command) -> Result<()> {
             false_alarms_per_hour,
             block_s,
             keep_model,
+            monitor,
         } => {
             if !(false_alarms_per_hour > 0.0 && false_alarms_per_hour.is_finite()) {
                 anyhow::bail!(
@@ -286,7 +292,7 @@ fn run(command: Command) -> Result<()> {
                 block_s,
                 identify: !keep_model,
             };
-            let cal = fdd::calibrate::calibrate(&inputs, &cfg, &opts)?;
+            let cal = fdd::calibrate::calibrate_inputs(&inputs, &cfg, &opts, monitor.as_deref())?;
             let written = cal.write(&out)?;
             emit(&format!(
                 "{}wrote {} (use: fdd replay --config {} LOG)\n",

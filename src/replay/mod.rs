@@ -704,6 +704,16 @@ fn replay_with(
     Ok(summary)
 }
 
+/// The enabled subsystem monitors that would run on `log` (see [`monitors_for_log`]).
+pub(crate) fn monitors_on_log(log: &Path, cfg: &RuntimeConfig) -> Result<Vec<String>, ReplayError> {
+    let reader = LogReader::open(log)?;
+    let topics: Vec<String> = match reader.mode() {
+        ReadMode::Indexed => reader.channels().map(|c| c.topic.to_string()).collect(),
+        _ => scan_topics(log),
+    };
+    Ok(monitors_for_log(cfg, &topics).0)
+}
+
 /// The enabled subsystem monitors that run on a log with these topics, and those that do
 /// not (with the reason). A monitor runs when the log carries at least one of its input
 /// topics; a log that carries no monitor's topics at all is more likely mapped wrongly than

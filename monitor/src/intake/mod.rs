@@ -112,6 +112,9 @@ use crate::signal_table::{SignalId, SignalTable};
 
 /// Segments kept for refitting from an onset (5 s at 6000 rpm, 38 s at 800 rpm).
 const HISTORY: usize = 1024;
+/// Segments between two outputs of the learned corrections (`maf_correction`,
+/// `throttle_correction`): they move over `adapt_time_s`, not per segment.
+const CORRECTION_OUTPUT_SEGMENTS: u64 = 64;
 /// Segments before the alarm test's onset estimate that the onset scan still considers.
 const ONSET_MARGIN: u64 = 6;
 /// Longest look-back of the onset scan (segments): bounds the one-off refit at an alarm to
@@ -1230,6 +1233,9 @@ impl IntakeMonitor {
         if let Some(e) = est {
             e.emit(out);
         }
+        if self.segment % CORRECTION_OUTPUT_SEGMENTS == 0 {
+            self.emit_corrections(out);
+        }
         let flagged = self.diagnose(res.alarm.is_some());
         out(Output::Diagnosis {
             flagged,
@@ -2194,6 +2200,28 @@ impl IntakeMonitor {
             w_half: slope * half,
             source,
         })
+    }
+
+    /// The learned corrections as they stand, unbounded by `adapt_limit` (what the plant asks
+    /// of them; the monitor applies them clamped): `maf_correction` and `throttle_correction`
+    /// (-), each once it has learned for `adapt_min_s`. `fdd calibrate` reads them to size
+    /// `adapt_limit` for a plant.
+    fn emit_corrections(&self, out: &mut OutputSink<'_>) {
+        for (name, r) in [
+            ("maf_correction", &self.maf_ratio),
+            ("throttle_correction", &self.throttle_ratio),
+        ] {
+            if r.time_s >= self.cfg.adapt_min_s {
+                let v = r.value(f64::INFINITY);
+                out(Output::Estimate {
+                    name,
+                    value: v,
+                    lower: v,
+                    upper: v,
+                    source: "learned",
+                });
+            }
+        }
     }
 
     fn reset_cycle_state(&mut self) {
