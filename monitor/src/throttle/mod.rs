@@ -825,6 +825,16 @@ impl ThrottleMonitor {
                     watt_std_w,
                     "TPS failed: position from the wattmeter estimate"
                 );
+                // The position output leaves the TPS: the combined filter goes on without it,
+                // from the wattmeter-only filter's state, which no TPS reading has moved. A
+                // drift pulls the combined filter along for as long as it takes to name it
+                // (seconds to tens of seconds), and from there the wattmeter alone brings the
+                // angle back only slowly. With the wattmeter failed too there is nothing
+                // better than where the combined filter stands.
+                if self.tps_fault.is_none() && self.watt_fault.is_none() {
+                    let (x, p) = (*self.watt_ukf.state(), *self.watt_ukf.covariance());
+                    let _reset_ok = self.both_ukf.reset(x, p).is_ok();
+                }
                 self.tps_fault = d;
                 self.heal_run[0] = 0;
             }
@@ -1015,7 +1025,10 @@ impl ThrottleMonitor {
                 // with the wattmeter estimate again: the TPS filter absorbs a drift or a bias
                 // that stays, so its tests alone would heal a fault still present.
                 _ => {
+                    // Not on readings held at a rail: a drift clipped at 0 V agrees with a plate
+                    // resting near the closed stop, and says nothing of the sensor.
                     self.frozen_run < self.cfg.frozen_samples
+                        && self.at_rail_run < self.rail_persist
                         && agrees
                         && quiet(&results[0])
                         && quiet(&results[1])
