@@ -86,7 +86,7 @@ pub enum CalibrateError {
         fault: String,
         t_s: f64,
     },
-    #[error("no throttle data in the logs (the throttle monitor produced no `{0}` statistic)")]
+    #[error("no data for `{0}` in the logs (its monitor produced none: are they logs of that monitor's subsystem?)")]
     NoData(&'static str),
     #[error("test `{test}`: {source} ({hours:.2} h of data in blocks of {block_s} s); give longer or more logs")]
     TooShort {

@@ -267,4 +267,16 @@ fn intake_calibration_finds_the_noise_levels_and_refuses_a_faulty_log() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("one monitor at a time"), "{err}");
+
+    // Asked for the intake monitor on a throttle log: no intake data, said so.
+    let out = fdd()
+        .arg("calibrate")
+        .arg(&throttle)
+        .args(["--monitor", "intake", "-o"])
+        .arg(dir.path().join("wrong"))
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no data for `intake_map_noise`"), "{err}");
 }
