@@ -199,3 +199,34 @@ fn evaluate_scores_logs_and_scenarios_against_their_truth() {
         "{err}"
     );
 }
+
+/// `fdd evaluate --json` says in which log the false alarms and false DTCs fell: a healthy
+/// plant beyond the default configuration's range (the intake calibration set's training log:
+/// false DTCs with the default) beside the nominal intake fixture (none).
+#[test]
+fn evaluate_counts_false_alarms_per_log() {
+    let out = fdd()
+        .args(["evaluate", "--json"])
+        .arg(root().join("fixtures/data/intake_nominal.mcap"))
+        .arg(root().join("fixtures/sets/intake_calibrate_train"))
+        .output()
+        .expect("run");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let logs = v["logs"].as_array().expect("logs");
+    assert_eq!(logs.len(), 2);
+    let count = |l: &serde_json::Value, k: &str| l[k].as_u64().expect("count");
+    assert_eq!(count(&logs[0], "false_dtcs"), 0, "{}", logs[0]);
+    assert_eq!(count(&logs[0], "false_alarms"), 0, "{}", logs[0]);
+    assert!(count(&logs[1], "false_dtcs") > 0, "{}", logs[1]);
+    let m = &v["monitors"][0];
+    assert_eq!(m["monitor"], "intake");
+    for k in ["false_dtcs", "false_alarms"] {
+        let total: u64 = logs.iter().map(|l| count(l, k)).sum();
+        assert_eq!(m[k].as_u64(), Some(total), "{k}: {v}");
+    }
+}

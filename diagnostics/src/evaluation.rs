@@ -341,6 +341,11 @@ impl Evaluator {
         Ok(())
     }
 
+    /// False alarms and false DTCs counted so far (the difference across a log is that log's).
+    pub fn false_counts(&self) -> (u64, u64) {
+        (self.false_alarms, self.false_dtcs)
+    }
+
     /// The figures over everything given so far (ends the current log).
     pub fn report(&mut self) -> EvaluationReport {
         self.end_log();

@@ -136,6 +136,14 @@ impl Evaluation {
         }
     }
 
+    /// False alarms and false DTCs counted so far over every monitor.
+    pub fn false_counts(&self) -> (u64, u64) {
+        self.monitors
+            .iter()
+            .map(|m| m.evaluator.false_counts())
+            .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+    }
+
     /// The log ended.
     pub fn end_log(&mut self) {
         for m in &mut self.monitors {

@@ -68,6 +68,10 @@ pub struct LogResult {
     /// Per estimate whose source changed in this log (the throttle position switched from the
     /// TPS to the wattmeter estimate), its error against the truth from the switch on.
     pub after_switch: Vec<SwitchError>,
+    /// False alarms and false DTCs in this log, over every monitor (where the set totals come
+    /// from).
+    pub false_alarms: u64,
+    pub false_dtcs: u64,
 }
 
 /// An estimate's error against the truth after its source first changed in a log.
@@ -148,6 +152,7 @@ pub fn evaluate(
     let opts = ReplayOptions::default();
     for (i, file) in logs.iter().enumerate() {
         progress(i, logs.len(), file);
+        let before = evaluation.false_counts();
         let summary = if extension(file) == Some("toml") {
             let tmp = tempfile::Builder::new()
                 .prefix("fdd-evaluate-")
@@ -165,6 +170,7 @@ pub fn evaluate(
         } else {
             replay_observed(file, cfg, &opts, &mut evaluation)?
         };
+        let after = evaluation.false_counts();
         if let Some(message) = summary.stopped_early {
             return Err(EvaluateError::StoppedEarly {
                 file: file.clone(),
@@ -200,6 +206,8 @@ pub fn evaluate(
                     })
                 })
                 .collect(),
+            false_alarms: after.0 - before.0,
+            false_dtcs: after.1 - before.1,
         });
     }
     if let Some(msg) = &evaluation.first_refusal {
