@@ -119,14 +119,12 @@ fn a_closed_stdout_ends_the_replay_quietly() {
     assert!(out.status.success(), "{:?}: {err}", out.status);
 }
 
-/// `fdd evaluate` on a log and a scenario file (simulated on the fly): the JSON figures say
-/// what happened, and each episode is judged against the right fault type.
-#[test]
-fn evaluate_scores_logs_and_scenarios_against_their_truth() {
+/// `fdd evaluate --json` on `inputs` (relative to the repository root), which must succeed;
+/// its report.
+fn evaluate_json(inputs: &[&str]) -> serde_json::Value {
     let out = fdd()
         .args(["evaluate", "--json"])
-        .arg(root().join("fixtures/data/throttle_tps_open.mcap"))
-        .arg(root().join("fixtures/scenarios/throttle_wattmeter.toml"))
+        .args(inputs.iter().map(|p| root().join(p)))
         .output()
         .expect("run");
     assert!(
@@ -134,7 +132,17 @@ fn evaluate_scores_logs_and_scenarios_against_their_truth() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    serde_json::from_slice(&out.stdout).expect("json")
+}
+
+/// `fdd evaluate` on a log and a scenario file (simulated on the fly): the JSON figures say
+/// what happened, and each episode is judged against the right fault type.
+#[test]
+fn evaluate_scores_logs_and_scenarios_against_their_truth() {
+    let v = evaluate_json(&[
+        "fixtures/data/throttle_tps_open.mcap",
+        "fixtures/scenarios/throttle_wattmeter.toml",
+    ]);
     assert_eq!(v["logs"].as_array().map(Vec::len), Some(2));
     let m = &v["monitors"][0];
     assert_eq!(m["monitor"], "throttle");
@@ -205,18 +213,10 @@ fn evaluate_scores_logs_and_scenarios_against_their_truth() {
 /// false DTCs with the default) beside the nominal intake fixture (none).
 #[test]
 fn evaluate_counts_false_alarms_per_log() {
-    let out = fdd()
-        .args(["evaluate", "--json"])
-        .arg(root().join("fixtures/data/intake_nominal.mcap"))
-        .arg(root().join("fixtures/sets/intake_calibrate_train"))
-        .output()
-        .expect("run");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let v = evaluate_json(&[
+        "fixtures/data/intake_nominal.mcap",
+        "fixtures/sets/intake_calibrate_train",
+    ]);
     let logs = v["logs"].as_array().expect("logs");
     assert_eq!(logs.len(), 2);
     let count = |l: &serde_json::Value, k: &str| l[k].as_u64().expect("count");

@@ -24,6 +24,18 @@ fn evaluate(name: &str, scenario: &str) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).expect("json")
 }
 
+/// The time (s) of the first DTC in `log` whose code starts with `prefix`.
+fn first_dtc_s(log: &serde_json::Value, prefix: &str) -> Option<f64> {
+    log["dtcs"]
+        .as_array()
+        .expect("dtcs")
+        .iter()
+        .filter_map(|d| d.as_str())
+        .find(|d| d.starts_with(prefix))
+        .and_then(|d| d.rsplit("@ ").next())
+        .and_then(|t| t.trim().parse::<f64>().ok())
+}
+
 // A TPS shorted to its 5 V rail while the plate rests near the open stop, behind a TPS 2 %
 // high in gain (a healthy sensor clips at 5 V there): the circuit fault heals at the stop,
 // since the wattmeter estimate cannot rule the rail reading out, and must fail again when the
@@ -157,14 +169,7 @@ start_s = 453.0
 fn a_tps_stuck_at_the_stop_reading_is_named_when_the_plate_leaves_the_stop() {
     let v = evaluate("throttle_stuck_at_the_stop", THROTTLE_STUCK_AT_THE_STOP);
     let log = &v["logs"][0];
-    let first_tps = log["dtcs"]
-        .as_array()
-        .expect("dtcs")
-        .iter()
-        .filter_map(|d| d.as_str())
-        .find(|d| d.starts_with("P012"))
-        .and_then(|d| d.rsplit("@ ").next())
-        .and_then(|t| t.trim().parse::<f64>().ok());
+    let first_tps = first_dtc_s(log, "P012");
     assert!(
         first_tps.is_some_and(|t| (453.0..463.0).contains(&t)),
         "a TPS DTC within 10 s of the onset at 453 s: {log}"
@@ -209,14 +214,7 @@ start_s = 468.0
 fn a_plate_stuck_at_the_closed_stop_is_named_despite_rail_band_dips() {
     let v = evaluate("throttle_plate_stuck_closed", THROTTLE_PLATE_STUCK_CLOSED);
     let log = &v["logs"][0];
-    let plate = log["dtcs"]
-        .as_array()
-        .expect("dtcs")
-        .iter()
-        .filter_map(|d| d.as_str())
-        .find(|d| d.starts_with("P2119"))
-        .and_then(|d| d.rsplit("@ ").next())
-        .and_then(|t| t.trim().parse::<f64>().ok());
+    let plate = first_dtc_s(log, "P2119");
     assert!(
         plate.is_some_and(|t| (468.0..473.0).contains(&t)),
         "P2119 within 5 s of the onset at 468 s: {log}"
@@ -350,14 +348,7 @@ start_s = 451.0
 fn a_tps_open_at_idle_is_named_at_the_first_blips() {
     let v = evaluate("throttle_open_at_idle", THROTTLE_OPEN_AT_IDLE);
     let log = &v["logs"][0];
-    let first_tps = log["dtcs"]
-        .as_array()
-        .expect("dtcs")
-        .iter()
-        .filter_map(|d| d.as_str())
-        .find(|d| d.starts_with("P012"))
-        .and_then(|d| d.rsplit("@ ").next())
-        .and_then(|t| t.trim().parse::<f64>().ok());
+    let first_tps = first_dtc_s(log, "P012");
     assert!(
         first_tps.is_some_and(|t| (451.0..455.0).contains(&t)),
         "a TPS DTC within 4 s of the onset at 451 s: {log}"
