@@ -321,7 +321,8 @@ pub struct ThrottleMonitor {
     last_predicted_w: f64,
     /// The same for the wattmeter-only filter (W).
     last_predicted_wo: f64,
-    /// Steps in a row the plate has been static while driven, and how many make it stuck.
+    /// Debounce counter of the plate static while driven (steps): up one per step it holds,
+    /// down one per step it does not; `plate_persist` makes it stuck.
     static_run: u32,
     /// Steps in a row the TPS has been frozen while the voltage should move the plate.
     frozen_driven_run: u32,
@@ -707,8 +708,17 @@ impl ThrottleMonitor {
         }
         let static_tps =
             self.tps_hist.full() && self.tps_hist.span() < self.cfg.static_tps_range_deg;
+        // Away from the static map only off the end stops: a plate resting on a stop where the
+        // voltage pushes it is where the static map is least certain (near the open stop it is
+        // flat in the voltage, and a plant 1.5 % off Table I rests on the stop while the model's
+        // map puts it 12 deg short: retired held-out version 7, log 0). A plate stuck at a stop
+        // is still named when the voltage moves its map by `driven_range_deg`.
+        let [lo, hi] = self.model.params().angle_limits_deg;
+        let margin = self.cfg.driven_range_deg;
         let away = match (self.eq_hist.last(), self.tps_hist.last()) {
-            (Some(eq), Some(tps)) => (eq - tps).abs() > self.cfg.driven_range_deg,
+            (Some(eq), Some(tps)) => {
+                (eq - tps).abs() > margin && tps > lo + margin && tps < hi - margin
+            }
             _ => false,
         };
         let driven =
@@ -897,13 +907,21 @@ impl ThrottleMonitor {
             self.end_episode();
         }
         // The stuck-plate test runs on its own (a trusted TPS that does not move while the
-        // voltage should move the plate, and is not frozen: that would be the sensor).
-        let static_now = self.tps_fault.is_none()
-            && self.plate_fault.is_none()
-            && self.frozen_run < self.cfg.frozen_samples
-            && self.static_while_driven();
-        self.static_run = if static_now { self.static_run + 1 } else { 0 };
-        if self.static_run >= self.plate_persist {
+        // voltage should move the plate, and is not frozen: that would be the sensor). It
+        // counts up and down (counter-based debouncing, as AUTOSAR Dem's): a plate stuck where
+        // the static map puts it just past `driven_range_deg` makes the condition flicker with
+        // the TPS noise, and a counter reset at every miss never got there (a plate stuck for
+        // 40 s on steady holds went undetected).
+        let trusted = self.tps_fault.is_none() && self.plate_fault.is_none();
+        let static_now = trusted && self.static_while_driven();
+        self.static_run = if static_now {
+            self.static_run + 1
+        } else if trusted {
+            self.static_run.saturating_sub(1)
+        } else {
+            0
+        };
+        if self.static_run >= self.plate_persist && self.frozen_run < self.cfg.frozen_samples {
             self.static_run = 0;
             tracing::debug!(
                 time_s = now_s,
