@@ -33,9 +33,10 @@
 //! `decision_window_s` for the other tests (and for the plate test while it is counting), then
 //! names the fault: frozen TPS -> TPS stuck; only the combined wattmeter test, confirmed
 //! `watt_confirm_alarms` times within `watt_confirm_s`, and the wattmeter-only test alarming
-//! too -> wattmeter (P1651, manufacturer code); the combined wattmeter test confirmed with the
-//! wattmeter-only test quiet and the TPS away from the wattmeter-only angle -> TPS
-//! range/performance (a drift); a TPS test -> TPS range/performance (P0121). With the TPS
+//! too -> wattmeter (P1651, manufacturer code); the combined wattmeter test alarming
+//! `drift_confirm_alarms` times, the wattmeter-only test quiet and the TPS away from the
+//! wattmeter-only angle (judged on at least `DRIFT_SIGMA_FLOOR_DEG` of that filter's spread,
+//! not on the open stop) -> TPS range/performance (a drift); a TPS test -> TPS range/performance (P0121). With the TPS
 //! failed, the wattmeter-only test alone names a wattmeter fault, if still alarming after twice
 //! `watt_confirm_s` (model error fails it in bursts). An open or short circuit heals on readings
 //! off the rails, or on rail readings the wattmeter estimate cannot rule out (not the model
@@ -70,6 +71,10 @@ use crate::monitor::{Monitor, Output, OutputSink};
 use crate::monitor_events::{EventSpec, FreezeValues, MonitorEvents};
 use crate::signal_table::{SignalId, SignalTable};
 
+/// The least spread (deg) of the wattmeter-only filter's angle that the drift rule judges the
+/// TPS against: resting on a stop in its model, that filter's covariance collapses to a few
+/// tenths of a degree although the model's static map is degrees off near the stops.
+const DRIFT_SIGMA_FLOOR_DEG: f64 = 3.0;
 /// Capacity of the fixed rings (NIS window, motion window, dropout times).
 const RING: usize = 512;
 /// Steps between updates of the filters' `R` from the noise estimates.
@@ -390,6 +395,12 @@ impl ThrottleMonitor {
         }
         if cfg.watt_confirm_alarms == 0 {
             return Err(setting("watt_confirm_alarms", "must be at least 1"));
+        }
+        if cfg.drift_confirm_alarms == 0 || cfg.drift_confirm_alarms > cfg.watt_confirm_alarms {
+            return Err(setting(
+                "drift_confirm_alarms",
+                "must be at least 1 and at most watt_confirm_alarms",
+            ));
         }
         if !(cfg.rail_low_v < cfg.rail_high_v) {
             return Err(setting("rail_low_v", "must be below rail_high_v"));
@@ -777,11 +788,15 @@ impl ThrottleMonitor {
                 {
                     return Some(ThrottleFault::Wattmeter);
                 }
-            } else if self.fired[2] && self.watt_alarms >= self.cfg.watt_confirm_alarms {
+            } else if self.fired[2] && self.watt_alarms >= self.cfg.drift_confirm_alarms {
+                // The wattmeter-only test alarming too points at the wattmeter (its faulty
+                // readings also move that filter's angle away from the TPS): it is named once
+                // confirmed, and the drift rule waits.
                 if watt_only {
-                    return Some(ThrottleFault::Wattmeter);
-                }
-                if self.disagree_run >= self.disagree_persist {
+                    if self.watt_alarms >= self.cfg.watt_confirm_alarms {
+                        return Some(ThrottleFault::Wattmeter);
+                    }
+                } else if self.disagree_run >= self.disagree_persist {
                     return Some(ThrottleFault::TpsPerformance);
                 }
             }
@@ -1199,8 +1214,20 @@ impl Monitor for ThrottleMonitor {
             };
             self.last_tps = v;
             self.tps_hist.push(v / self.volts_per_deg);
-            self.disagree_run = if self.watt_fault.is_none() && self.tps_disagrees_with_wattmeter()
-            {
+            // The drift rule's disagreement, where the wattmeter-only filter is weakest: not
+            // on the open stop with that filter below it (the static map is flat there; a
+            // plant 1.5 % off Table I rests on the stop while the filter puts the plate 16 deg
+            // short), and never judged on less than `DRIFT_SIGMA_FLOOR_DEG` of that filter's
+            // spread (resting on the closed stop in its model it claims 0.25 deg while the
+            // plate is held at 8). Both named a healthy TPS on a tuning drive at the corners
+            // of the documented range. A TPS clipped at 5 V is the rail check's.
+            let hi = self.model.params().angle_limits_deg[1];
+            let tps_deg = v / self.volts_per_deg;
+            let (theta_wo, sigma_wo) = self.watt_only_angle();
+            let on_open_stop = tps_deg >= hi - self.cfg.driven_range_deg && theta_wo < tps_deg;
+            let disagrees = (tps_deg - theta_wo).abs()
+                > self.cfg.heal_agreement_deg + 2.0 * sigma_wo.max(DRIFT_SIGMA_FLOOR_DEG);
+            self.disagree_run = if self.watt_fault.is_none() && !on_open_stop && disagrees {
                 self.disagree_run.saturating_add(1)
             } else {
                 0
