@@ -737,15 +737,6 @@ impl ThrottleMonitor {
         static_tps && driven
     }
 
-    /// The TPS disagrees with the wattmeter-only filter's angle by more than
-    /// `heal_agreement_deg` plus two of that filter's standard deviations.
-    fn tps_disagrees_with_wattmeter(&self) -> bool {
-        let (theta, sigma) = self.watt_only_angle();
-        self.tps_hist
-            .last()
-            .is_some_and(|tps| (tps - theta).abs() > self.cfg.heal_agreement_deg + 2.0 * sigma)
-    }
-
     /// The wattmeter-only filter's plate angle and its standard deviation (deg).
     fn watt_only_angle(&self) -> (f64, f64) {
         let sigma =
