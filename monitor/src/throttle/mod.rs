@@ -275,7 +275,8 @@ pub struct ThrottleMonitor {
     watt_rail_run: u32,
     watt_rail_persist: u32,
     /// Samples in a row in which the TPS disagrees with the wattmeter-only filter's angle
-    /// ([`Self::tps_disagrees_with_wattmeter`]), and how many the drift rule needs
+    /// (by more than `heal_agreement_deg` plus two of that filter's standard deviations, at
+    /// least `DRIFT_SIGMA_FLOOR_DEG`; not on the open stop), and how many the drift rule needs
     /// (`decision_window_s`): that filter lags a fast plate move by up to about 0.15 s (a
     /// full-range swing onto the open stop, retired held-out version 5, log 53), and a
     /// disagreement that short is its lag, not the TPS's.
