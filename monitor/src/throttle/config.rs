@@ -159,6 +159,12 @@ pub struct ThrottleMonitorConfig {
     /// standard deviations of the estimate) of the wattmeter estimate: the TPS filter's own
     /// tests pass again on a drift or a bias it has absorbed.
     pub heal_agreement_deg: f64,
+    /// A failed TPS disagrees with the estimate only when it does so for this long (s): the
+    /// wattmeter estimate lags a fast plate move, near the closed stop by up to half a
+    /// second, and a healed TPS must not stay failed because of it. A fault still present
+    /// disagrees for longer than this (a bias or a drift persistently, a stuck TPS at once
+    /// through its frozen readings).
+    pub heal_disagreement_s: f64,
     /// DTCs (J2012 code and failure type byte).
     pub dtc_tps_low: String,
     pub dtc_tps_high: String,
@@ -225,6 +231,7 @@ impl Default for ThrottleMonitorConfig {
             plate_persist_s: 0.3,
             heal_s: 5.0,
             heal_agreement_deg: 4.0,
+            heal_disagreement_s: 0.5,
             dtc_tps_low: "P0122-16".into(),
             dtc_tps_high: "P0123-17".into(),
             dtc_tps_performance: "P0121-64".into(),
