@@ -1122,7 +1122,7 @@ impl ThrottleMonitor {
                 // still present, and the estimate's own error (5 to 7 deg for seconds on a
                 // plant a percent off Table I) is the size of a bias, so a forgiving
                 // agreement heals biases still there (tuning logs 9, 10 and 37). The price:
-                // a bias that ends may stay failed past the grace (tuning log 52, 41 s).
+                // a bias that ends may stay failed past the grace (tuning log 52, 42 s).
                 _ => Some(
                     self.frozen_run < self.cfg.frozen_samples
                         && self.at_rail_run < self.rail_persist
@@ -1132,11 +1132,7 @@ impl ThrottleMonitor {
                         && !matches!(results[3].verdict, Verdict::Failed),
                 ),
             };
-            match evidence {
-                Some(true) => self.heal_run[0] += 1,
-                Some(false) => self.heal_run[0] = 0,
-                None => {}
-            }
+            advance_heal(&mut self.heal_run[0], evidence);
             if self.heal_run[0] >= self.heal_steps {
                 tracing::debug!(time_s = now_s, fault = d.fault.name(), "TPS healed");
                 if matches!(d.fault, ThrottleFault::TpsOpen | ThrottleFault::TpsShort) {
@@ -1163,11 +1159,7 @@ impl ThrottleMonitor {
                 _ if !tps_testable || tps.is_none() => Some(true),
                 _ => Some(self.watt_heal_disagree_run < self.heal_disagree_persist),
             };
-            match evidence {
-                Some(true) => self.heal_run[1] += 1,
-                Some(false) => self.heal_run[1] = 0,
-                None => {}
-            }
+            advance_heal(&mut self.heal_run[1], evidence);
             if self.heal_run[1] >= self.heal_steps {
                 tracing::debug!(time_s = now_s, "wattmeter healed");
                 self.watt_fault = None;
@@ -1181,6 +1173,16 @@ impl ThrottleMonitor {
                 self.plate_fault = None;
             }
         }
+    }
+}
+
+/// One step of a heal run: evidence of health grows it, evidence of the fault restarts it, and
+/// a step that says nothing either way (`None`) leaves it.
+fn advance_heal(run: &mut u32, evidence: Option<bool>) {
+    match evidence {
+        Some(true) => *run = run.saturating_add(1),
+        Some(false) => *run = 0,
+        None => {}
     }
 }
 
