@@ -501,3 +501,82 @@ fn circuit_high_only_where_the_model_rules_the_reading_out() {
     let changes = feed(&mut mon, segs.into_iter());
     assert_eq!(raised(&changes), vec!["map_circuit_high"], "{changes:?}");
 }
+
+/// An open MAF line at idle reads 0, below the circuit-low limit, and leaves the filters: their
+/// estimate of the metered flow then rests on the MAP alone and scatters by about 1 g/s per
+/// segment around the true 3 g/s, so their 3-sigma rule never ruled the reading out, the frozen
+/// check waits for the circuit judgement, and nothing was ever named (tuning log 52). The
+/// throttle model's flow at the MAP reading rules it out.
+#[test]
+fn an_open_maf_line_at_idle_is_named() {
+    for seed in [3, 4, 5] {
+        let open_s = 20.0;
+        let sc = IntakeScenario::new(
+            "maf_open_idle",
+            30.0,
+            seed,
+            ProfileSpec::Idle(IdleSpec::default()),
+            IntakeFault::MafOpen { start_s: open_s },
+        );
+        let mut mon = monitor();
+        let changes = feed(&mut mon, simulate(&sc));
+        let named = changes
+            .iter()
+            .find(|c| c.failed && c.event == "maf_circuit_low")
+            .map(|c| c.t_s);
+        println!("seed {seed}: maf_circuit_low at {named:?}");
+        assert!(
+            named.is_some_and(|t| t >= open_s && t < open_s + 1.0),
+            "seed {seed}: {changes:?}"
+        );
+    }
+}
+
+/// A noisy MAP while the pedal moves in even 2-s ramps: the noise test skips only the start and
+/// end of each ramp (where the throttle's rate changes), not the ramp itself, and names the
+/// sensor within a second; skipping every segment faster than 10 deg/s (the rule before
+/// 2026-12-05) left it untested most of the time.
+#[test]
+fn a_noisy_map_is_named_while_the_pedal_ramps() {
+    let spec = ProfileSpec::TipInOut(TipInOutSpec {
+        ramp_s: 2.0,
+        dwell_s: [2.0, 2.3],
+        ..Default::default()
+    });
+    let noise_s = 30.0;
+    let sc = IntakeScenario::new(
+        "map_noise_ramps",
+        45.0,
+        7,
+        spec,
+        IntakeFault::MapNoise {
+            start_s: noise_s,
+            std_pa: 2500.0,
+        },
+    );
+    let first = |cfg: IntakeMonitorConfig| {
+        let mut mon = IntakeMonitor::new(&default_intake_model(), &cfg, &table()).expect("monitor");
+        mon.start_operation_cycle(0, &mut |_| {});
+        let changes = feed(&mut mon, simulate(&sc));
+        assert!(
+            !changes.iter().any(|c| c.failed && c.t_s < noise_s),
+            "{changes:?}"
+        );
+        changes
+            .iter()
+            .find(|c| c.failed && c.event == "map_range_performance")
+            .map(|c| c.t_s)
+    };
+    let now = first(IntakeMonitorConfig::default());
+    let before = first(IntakeMonitorConfig {
+        noise_max_throttle_rate_deg_s: 10.0,
+        noise_max_throttle_rate_change_deg_s: 1e9,
+        ..Default::default()
+    });
+    println!("map_range_performance at {now:?}; with the old gate at {before:?}");
+    assert!(now.is_some_and(|t| t < noise_s + 1.0), "{now:?}");
+    assert!(
+        before.is_none_or(|t| t > now.unwrap_or(f64::MAX)),
+        "{before:?}"
+    );
+}

@@ -7,8 +7,9 @@
 //!
 //! 1. **Noise.** A first pass replays every log with the thresholds out of reach. The raw MAP
 //!    and MAF samples give the noise levels from their second differences over consecutive
-//!    segments, kept only while the throttle has been steady (the monitor's own rule,
-//!    `noise_max_throttle_rate_deg_s` for `noise_settle_segments`): a live reading's change
+//!    segments, kept only while the throttle has been steady (the monitor's own rule: for
+//!    `noise_settle_segments`, no segment faster than `noise_max_throttle_rate_deg_s` or changing
+//!    its rate by more than `noise_max_throttle_rate_change_deg_s`): a live reading's change
 //!    over three segments is nearly linear there, so what is left is noise of variance `6 R`
 //!    (relative to the reading for the MAF). A robust scale (1.4826 times the median absolute
 //!    deviation) ignores the transients that slip through. The MAF's absolute `R`
@@ -169,6 +170,7 @@ struct Collector {
     /// Runtime signal names: MAP, MAF, throttle.
     signals: [String; 3],
     max_throttle_rate: f64,
+    max_throttle_rate_change: f64,
     settle: u32,
     adapt_time_ns: u64,
     maxima: [Vec<(f64, usize, f64)>; TESTS.len()],
@@ -177,6 +179,7 @@ struct Collector {
     map: SecondDiff,
     maf: SecondDiff,
     last_throttle: Option<(u64, f64)>,
+    last_throttle_rate: Option<f64>,
     steady_run: u32,
     correction_dev: [f64; 2],
     fault: Option<(String, f64)>,
@@ -196,6 +199,7 @@ impl Collector {
                 m.throttle_signal.clone(),
             ],
             max_throttle_rate: m.noise_max_throttle_rate_deg_s,
+            max_throttle_rate_change: m.noise_max_throttle_rate_change_deg_s,
             settle: m.noise_settle_segments,
             adapt_time_ns: (m.adapt_time_s * 1e9) as u64,
             maxima: Default::default(),
@@ -204,6 +208,7 @@ impl Collector {
             map: SecondDiff::default(),
             maf: SecondDiff::default(),
             last_throttle: None,
+            last_throttle_rate: None,
             steady_run: 0,
             correction_dev: [0.0; 2],
             fault: None,
@@ -224,6 +229,7 @@ impl ReplayObserver for Collector {
         self.map.reset();
         self.maf.reset();
         self.last_throttle = None;
+        self.last_throttle_rate = None;
         self.steady_run = 0;
         self.first_ns = None;
     }
@@ -233,15 +239,19 @@ impl ReplayObserver for Collector {
             if let Some((t0, v0)) = self.last_throttle {
                 let dt = t_ns.saturating_sub(t0) as f64 * 1e-9;
                 let rate = if dt > 0.0 {
-                    (value - v0).abs() / dt
+                    (value - v0) / dt
                 } else {
                     f64::INFINITY
                 };
-                self.steady_run = if rate <= self.max_throttle_rate {
+                let change = self.last_throttle_rate.map_or(0.0, |r| (rate - r).abs());
+                self.steady_run = if rate.abs() <= self.max_throttle_rate
+                    && change <= self.max_throttle_rate_change
+                {
                     self.steady_run.saturating_add(1)
                 } else {
                     0
                 };
+                self.last_throttle_rate = rate.is_finite().then_some(rate);
             }
             self.last_throttle = Some((t_ns, value));
         } else if signal == self.signals[0] {

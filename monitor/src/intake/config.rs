@@ -169,10 +169,15 @@ pub struct IntakeMonitorConfig {
     pub noise_ratio: f64,
     pub noise_threshold: f64,
     /// The noise tests skip a segment in which the throttle moves faster than
-    /// `noise_max_throttle_rate_deg_s` (deg/s), and the `noise_settle_segments` after it: a
-    /// tip-in moves the manifold faster than the random-walk throttle flow of the local filters
-    /// follows, and their innovations are not noise then.
+    /// `noise_max_throttle_rate_deg_s` (deg/s), or changes its rate by more than
+    /// `noise_max_throttle_rate_change_deg_s` (deg/s) from the segment before, and the
+    /// `noise_settle_segments` after it. A tip-in bends the readings' course within a few
+    /// segments, and their second difference is not noise then; a steady ramp (a pedal moved
+    /// at an even pace) bends it little: at 20 deg/s the manifold pressure's second difference
+    /// from the throttle's curvature is about a tenth of the MAP noise's, so only the start
+    /// and end of a ramp, where its rate changes, are skipped.
     pub noise_max_throttle_rate_deg_s: f64,
+    pub noise_max_throttle_rate_change_deg_s: f64,
     pub noise_settle_segments: u32,
     pub noise_cap: f64,
     pub noise_learn_limit: f64,
@@ -283,7 +288,8 @@ impl Default for IntakeMonitorConfig {
             adapt_limit: 0.08,
             noise_ratio: 4.0,
             noise_threshold: 30.0,
-            noise_max_throttle_rate_deg_s: 10.0,
+            noise_max_throttle_rate_deg_s: 40.0,
+            noise_max_throttle_rate_change_deg_s: 5.0,
             noise_settle_segments: 10,
             noise_cap: 16.0,
             noise_learn_limit: 3.0,

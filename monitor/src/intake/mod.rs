@@ -134,6 +134,15 @@ const RESTART_SETTLE_S: f64 = 1.0;
 const ALARM_ACTIVE_S: f64 = 1.0;
 /// Segments of its last change a moving estimate is given in the circuit checks.
 const ESTIMATE_SETTLE_SEGMENTS: f64 = 10.0;
+/// Share of the throttle model's flow at the MAP reading that rules out a MAF reading below
+/// its circuit-low limit. With the MAF reading left out of the filters, their estimate of the
+/// metered flow rests on the MAP alone and scatters by about 1 g/s from segment to segment at
+/// idle, where the true flow is 3 g/s, so their 3-sigma rule never rules out an open MAF line
+/// there; the throttle's orifice flow at the measured pressure and opening is known within a
+/// few percent (choked at idle): 70 % of it leaves room for the plant's discharge and angle
+/// errors, and at 2 deg (3 g/s) is still above the limit plus its margin (1.5 g/s), while a
+/// closed plate's leakage is not.
+const THROTTLE_MODEL_LOW_SHARE: f64 = 0.7;
 /// A refit that leaves less than this fraction of a decided fault's error is its healing.
 const HEALED_FRACTION: f64 = 0.25;
 
@@ -520,6 +529,8 @@ pub struct IntakeMonitor {
     maf_rate: f64,
     /// Throttle opening of the last segment and segments since it last moved fast.
     last_throttle: f64,
+    /// The throttle's rate of change (deg/s) over the last segment (NaN before two readings).
+    last_throttle_rate: f64,
     throttle_steady_run: u32,
     map_low_run: u32,
     map_high_run: u32,
@@ -608,6 +619,10 @@ impl IntakeMonitor {
             (
                 "noise_max_throttle_rate_deg_s",
                 cfg.noise_max_throttle_rate_deg_s,
+            ),
+            (
+                "noise_max_throttle_rate_change_deg_s",
+                cfg.noise_max_throttle_rate_change_deg_s,
             ),
             ("residual_heal_llr", cfg.residual_heal_llr),
         ] {
@@ -730,6 +745,7 @@ impl IntakeMonitor {
             map_rate: 0.0,
             maf_rate: 0.0,
             last_throttle: f64::NAN,
+            last_throttle_rate: f64::NAN,
             throttle_steady_run: 0,
             map_low_run: 0,
             map_high_run: 0,
@@ -959,8 +975,19 @@ impl IntakeMonitor {
         };
         self.map_rate = rate(seg.map_pa, self.last_map);
         self.maf_rate = rate(seg.maf_kg_s, self.last_maf);
-        let fast = rate(seg.throttle_deg, self.last_throttle).abs()
-            > self.cfg.noise_max_throttle_rate_deg_s;
+        let throttle_rate = rate(seg.throttle_deg, self.last_throttle);
+        let rate_change = if self.last_throttle_rate.is_finite() {
+            (throttle_rate - self.last_throttle_rate).abs()
+        } else {
+            0.0
+        };
+        let fast = throttle_rate.abs() > self.cfg.noise_max_throttle_rate_deg_s
+            || rate_change > self.cfg.noise_max_throttle_rate_change_deg_s;
+        self.last_throttle_rate = if self.last_throttle.is_finite() {
+            throttle_rate
+        } else {
+            f64::NAN
+        };
         self.last_throttle = seg.throttle_deg;
         self.throttle_steady_run = if fast {
             0
@@ -1049,13 +1076,18 @@ impl IntakeMonitor {
                 && ruled_out(1, self.cfg.map_low_pa + self.cfg.map_low_margin_pa, true));
         let map_high = seg.map_pa > map_high_limit
             && ruled_out(1, map_high_limit - self.cfg.map_high_margin_pa, false);
+        // A MAP reading within its circuit range, from a sensor not named failed, also rules a
+        // low MAF reading out through the throttle model (THROTTLE_MODEL_LOW_SHARE).
+        let maf_low_limit = self.cfg.maf_low_kg_s + self.cfg.maf_low_margin_kg_s;
+        let map_trusted =
+            (self.cfg.map_low_pa..=map_high_limit).contains(&seg.map_pa) && !self.sensor_named(MAP);
         let maf_low = seg.maf_kg_s.is_nan()
             || (seg.maf_kg_s < self.cfg.maf_low_kg_s
-                && ruled_out(
-                    3,
-                    self.cfg.maf_low_kg_s + self.cfg.maf_low_margin_kg_s,
-                    true,
-                ));
+                && ((map_trusted
+                    && THROTTLE_MODEL_LOW_SHARE
+                        * self.model.throttle_flow(seg.map_pa, seg.throttle_deg)
+                        > maf_low_limit)
+                    || ruled_out(3, maf_low_limit, true)));
         let map_in_range = Self::circuit(
             &mut self.map_low_run,
             &mut self.map_high_run,
@@ -2241,6 +2273,7 @@ impl IntakeMonitor {
         (self.prev_map, self.prev_maf) = (f64::NAN, f64::NAN);
         (self.map_rate, self.maf_rate) = (0.0, 0.0);
         self.last_throttle = f64::NAN;
+        self.last_throttle_rate = f64::NAN;
         self.throttle_steady_run = 0;
         self.choked_run = 0;
         self.segment = 0;
