@@ -79,7 +79,11 @@
 //! ([`Compensation`]) and taken out of the residuals, so the tests go on looking for new
 //! faults (a second, different fault gets its own DTC; a later refit of the same hypothesis
 //! refines its size), and a sequential test on the residuals between "still there" and "gone"
-//! lets it pass again once it has healed.
+//! (Huber's loss, so that a large effect can be told gone) lets it pass again once it has
+//! healed: when that test has favoured "gone" for `heal_s` while the raw residuals (the
+//! fault's effect added back) read quiet. The filters, whose states followed the compensated
+//! inputs, then start again, and the next alarm's onset scan looks no further back than their
+//! settling.
 //!
 //! Recovery policy: the estimate output (`manifold_pressure`, `intake_valve_flow`) comes from
 //! the local filter that the decided faults leave sound: the MAF-only one after a MAP fault,
@@ -145,6 +149,13 @@ const ESTIMATE_SETTLE_SEGMENTS: f64 = 10.0;
 const THROTTLE_MODEL_LOW_SHARE: f64 = 0.7;
 /// A refit that leaves less than this fraction of a decided fault's error is its healing.
 const HEALED_FRACTION: f64 = 0.25;
+
+/// Clip (allowances) of the raw residuals whose means tell that a decided fault has gone.
+const RAW_CLIP: f64 = 3.0;
+
+/// Share of a decided fault's predicted effect that its raw residuals may keep once it has gone
+/// (the prediction is linearized about the compensated filters' trajectory).
+const RAW_EFFECT_SHARE: f64 = 0.05;
 
 /// Number of events.
 pub const EVENTS: usize = 11;
@@ -404,6 +415,8 @@ struct ResidualFault {
     /// new operating point leaves them off zero.
     raw_p: f64,
     raw_w: f64,
+    /// Time (s) since the throttle-flow residual was last tested.
+    raw_w_age_s: f64,
 }
 
 /// An exponentially weighted ratio `sum num / sum den`, learned over a time constant.
@@ -545,6 +558,9 @@ pub struct IntakeMonitor {
     noise: [NoiseTest; 2],
     /// Time (s) the residual tests still wait after the filters started again.
     settle_s: f64,
+    /// The last segment of the filters' settling after they last started again (0: never):
+    /// the onset scan looks no further back.
+    restart_segment: u64,
     /// The centralized EKF's estimate of the sensors' outputs (p_mes, W_mes) before the last
     /// segment's step (for the circuit checks' settling allowance).
     est_prev: [f64; 2],
@@ -756,6 +772,7 @@ impl IntakeMonitor {
             throttle_ratio: LearnedRatio::default(),
             noise: [NoiseTest::default(); 2],
             settle_s: 0.0,
+            restart_segment: 0,
             est_prev: [f64::NAN; 2],
             learn: None,
             history: RecordRing::new(HISTORY),
@@ -1148,10 +1165,7 @@ impl IntakeMonitor {
             }
         }
         if restart {
-            self.filters = None;
-            self.settle_s = RESTART_SETTLE_S;
-            self.close_episode();
-            self.rearm();
+            self.restart_filters();
         }
 
         // Decided residual faults are taken out of what the filters see: the sensors' readings
@@ -1182,6 +1196,9 @@ impl IntakeMonitor {
                 let maf_f = seg_c.maf_kg_s * self.maf_ratio.value(self.cfg.adapt_limit);
                 self.run_filters_partial(&u_c, seg_c.map_pa, maf_f, map_ok, maf_ok);
             }
+        }
+        if self.settle_s > 0.0 {
+            self.restart_segment = k;
         }
         self.settle_s = (self.settle_s - dt).max(0.0);
 
@@ -1326,6 +1343,16 @@ impl IntakeMonitor {
         self.nis_federated.clear();
     }
 
+    /// The filters start again from the next segment's readings (a sensor back in use after a
+    /// long absence), with the tests rearmed.
+    fn restart_filters(&mut self) {
+        self.restart_segment = self.segment;
+        self.filters = None;
+        self.settle_s = RESTART_SETTLE_S;
+        self.close_episode();
+        self.rearm();
+    }
+
     fn close_episode(&mut self) {
         self.episode = None;
     }
@@ -1431,7 +1458,9 @@ impl IntakeMonitor {
         group_passed: &mut bool,
     ) {
         let _ = dt;
-        // Healing: the sequential test has favoured "gone" for heal_s.
+        // Healing: the sequential test has favoured "gone" for heal_s. This segment's alarms
+        // came from residuals with the healed fault still taken out: no episode opens on them.
+        let mut healed = false;
         for i in 0..self.residual.len() {
             if let Some(f) = self.residual[i] {
                 if f.gone_s >= self.cfg.heal_s {
@@ -1441,12 +1470,15 @@ impl IntakeMonitor {
                         "intake residual fault healed"
                     );
                     self.residual[i] = None;
-                    self.close_episode();
+                    self.restart_filters();
                     *group_passed |= self.group;
                     self.group = false;
-                    self.rearm();
+                    healed = true;
                 }
             }
+        }
+        if healed {
+            return;
         }
         // A decided fault that the sequential test already favours as gone explains what the
         // residuals do now (its compensation leaves the negative of its effect): no new
@@ -1461,6 +1493,8 @@ impl IntakeMonitor {
                 let earliest = onset
                     .saturating_sub(ONSET_MARGIN)
                     .max(k.saturating_sub(ONSET_WINDOW_MAX))
+                    // Records from before the filters last started again are of other filters.
+                    .max(self.restart_segment + 1)
                     .max(1);
                 self.scan = OnsetScan::with_modes(
                     earliest,
@@ -1650,6 +1684,7 @@ impl IntakeMonitor {
                         "intake residual fault healed (refit)"
                     );
                     self.residual[i] = None;
+                    self.restart_filters();
                     return;
                 }
             }
@@ -1664,6 +1699,10 @@ impl IntakeMonitor {
                 time_s = now_s,
                 fault = best.fault.name(),
                 parameter = f.fit.parameter,
+                offset = f.fit.offset,
+                rate = f.fit.rate,
+                before = ?before,
+                after = ?f.comp.magnitude(y),
                 "intake fault refined"
             );
             return;
@@ -1706,6 +1745,7 @@ impl IntakeMonitor {
             gone_s: 0.0,
             raw_p: 0.0,
             raw_w: 0.0,
+            raw_w_age_s: 0.0,
         });
         tracing::debug!(
             time_s = now_s,
@@ -1999,20 +2039,49 @@ impl IntakeMonitor {
         let z_flow_c = z_flow;
         for f in self.residual.iter_mut().flatten() {
             let c = f.comp.step(&raw);
-            // LLR of "gone" (the residual then carries minus this effect) against "still there".
-            let llr = |zc: f64, c: f64| {
-                let zc = zc.clamp(-clip, clip);
-                -c * (2.0 * zc + c) / 2.0
+            // LLR of "gone" (the residual then carries minus this effect) against "still there",
+            // with Huber's loss beyond `clip` deviations: Gaussian near zero, linear in the tails,
+            // so that one wild segment weighs little and a large effect can still be told gone
+            // (clipping the residual alone makes the ratio negative for any effect above
+            // 2 clip, and a large fault could then never heal).
+            let huber = |x: f64| {
+                let a = x.abs();
+                if a <= clip {
+                    0.5 * a * a
+                } else {
+                    clip * a - 0.5 * clip * clip
+                }
             };
+            let llr = |zc: f64, c: f64| huber(zc) - huber(zc + c);
             let mut inc = llr(z_p_c, c.0 / s_p);
-            let a = (-dt / self.cfg.heal_s.max(dt)).exp();
-            f.raw_p = a * f.raw_p + (1.0 - a) * (z_p_c + c.0 / s_p).clamp(-clip, clip);
+            // The raw residuals' means over half of heal_s, each in units of its allowance (one
+            // deviation of noise plus RAW_EFFECT_SHARE of the effect taken back: the filters ran
+            // with the compensation, so its predicted effect misses a few percent of what they
+            // would show without it) and clipped at RAW_CLIP: only their being within one
+            // allowance of zero matters, and a fault's own residuals must not hold them off zero
+            // long after it has gone. A residual that is not tested (the throttle-flow one at
+            // wide-open throttle) stops counting once its mean is that old.
+            let a = (-dt / (0.5 * self.cfg.heal_s).max(dt)).exp();
+            let unit = |raw: f64, c: f64| {
+                (raw / (1.0 + RAW_EFFECT_SHARE * c.abs())).clamp(-RAW_CLIP, RAW_CLIP)
+            };
+            f.raw_p = a * f.raw_p + (1.0 - a) * unit(z_p_c + c.0 / s_p, c.0 / s_p);
             if z_flow_c.is_finite() {
                 inc += llr(z_flow_c, c.1 / s_w);
-                f.raw_w = a * f.raw_w + (1.0 - a) * (z_flow_c + c.1 / s_w).clamp(-clip, clip);
+                let u = unit(z_flow_c + c.1 / s_w, c.1 / s_w);
+                // A stale mean restarts from the new residual.
+                f.raw_w = if f.raw_w_age_s >= 0.5 * self.cfg.heal_s {
+                    u
+                } else {
+                    a * f.raw_w + (1.0 - a) * u
+                };
+                f.raw_w_age_s = 0.0;
+            } else {
+                f.raw_w_age_s += dt;
             }
             f.heal_llr = (f.heal_llr + inc).clamp(0.0, 2.0 * heal_thr);
-            let raw_quiet = f.raw_p.abs() < 1.0 && f.raw_w.abs() < 1.0;
+            let raw_quiet = f.raw_p.abs() < 1.0
+                && (f.raw_w.abs() < 1.0 || f.raw_w_age_s >= 0.5 * self.cfg.heal_s);
             f.gone_s = if f.heal_llr >= heal_thr && raw_quiet {
                 f.gone_s + dt
             } else {
