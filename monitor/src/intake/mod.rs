@@ -1343,8 +1343,9 @@ impl IntakeMonitor {
         self.nis_federated.clear();
     }
 
-    /// The filters start again from the next segment's readings (a sensor back in use after a
-    /// long absence), with the tests rearmed.
+    /// The filters start again from the next segment's readings, with the tests rearmed: a
+    /// sensor back in use after a long absence, or a decided residual fault healed (the states
+    /// followed inputs with its compensation, which no longer hold).
     fn restart_filters(&mut self) {
         self.restart_segment = self.segment;
         self.filters = None;
@@ -2061,7 +2062,8 @@ impl IntakeMonitor {
             // allowance of zero matters, and a fault's own residuals must not hold them off zero
             // long after it has gone. A residual that is not tested (the throttle-flow one at
             // wide-open throttle) stops counting once its mean is that old.
-            let a = (-dt / (0.5 * self.cfg.heal_s).max(dt)).exp();
+            let window_s = 0.5 * self.cfg.heal_s;
+            let a = (-dt / window_s.max(dt)).exp();
             let unit = |raw: f64, c: f64| {
                 (raw / (1.0 + RAW_EFFECT_SHARE * c.abs())).clamp(-RAW_CLIP, RAW_CLIP)
             };
@@ -2070,7 +2072,7 @@ impl IntakeMonitor {
                 inc += llr(z_flow_c, c.1 / s_w);
                 let u = unit(z_flow_c + c.1 / s_w, c.1 / s_w);
                 // A stale mean restarts from the new residual.
-                f.raw_w = if f.raw_w_age_s >= 0.5 * self.cfg.heal_s {
+                f.raw_w = if f.raw_w_age_s >= window_s {
                     u
                 } else {
                     a * f.raw_w + (1.0 - a) * u
@@ -2080,8 +2082,8 @@ impl IntakeMonitor {
                 f.raw_w_age_s += dt;
             }
             f.heal_llr = (f.heal_llr + inc).clamp(0.0, 2.0 * heal_thr);
-            let raw_quiet = f.raw_p.abs() < 1.0
-                && (f.raw_w.abs() < 1.0 || f.raw_w_age_s >= 0.5 * self.cfg.heal_s);
+            let raw_quiet =
+                f.raw_p.abs() < 1.0 && (f.raw_w.abs() < 1.0 || f.raw_w_age_s >= window_s);
             f.gone_s = if f.heal_llr >= heal_thr && raw_quiet {
                 f.gone_s + dt
             } else {
