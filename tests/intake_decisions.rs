@@ -9,7 +9,9 @@
 
 use fdd_diagnostics::dtc::StatusBit;
 use fdd_fixtures::intake_faults::IntakeFaultSpec;
-use fdd_fixtures::intake_profile::{IdleSpec, PedalRampsSpec, ProfileSpec, TipInOutSpec};
+use fdd_fixtures::intake_profile::{
+    IdleBlipsSpec, IdleSpec, PedalRampsSpec, ProfileSpec, TipInOutSpec,
+};
 use fdd_fixtures::intake_sim::{default_intake_model, IntakeFault, IntakeScenario, IntakeSim};
 use fdd_monitor::intake::{IntakeMonitor, IntakeMonitorConfig, Segment, GROUP_EVENT};
 use fdd_monitor::monitor::{Monitor, Output};
@@ -606,26 +608,106 @@ fn a_large_maf_drift_that_ends_heals_within_10_s() {
             },
             end_s,
         );
+        let mon = raised_once_and_healed(&sc, "maf_range_performance", end_s);
+        assert!(mon.decision().is_none(), "{:?}", mon.decision());
+    }
+}
+
+/// Runs `sc` and checks that `event` is the only specific DTC raised and that it passes within
+/// 10 s after the fault's end at `end_s` (s); returns the monitor for further checks.
+fn raised_once_and_healed(sc: &IntakeScenario, event: &str, end_s: f64) -> IntakeMonitor {
+    let mut mon = monitor();
+    let changes = feed(&mut mon, simulate(sc));
+    let seed = sc.seed;
+    let raised: Vec<&str> = raised(&changes)
+        .into_iter()
+        .filter(|e| *e != GROUP_EVENT)
+        .collect();
+    assert_eq!(raised, vec![event], "seed {seed}: {changes:?}");
+    let heal = changes
+        .iter()
+        .find(|c| c.event == event && !c.failed)
+        .map(|c| c.t_s);
+    println!("seed {seed}: healed at {heal:?}");
+    assert!(
+        heal.is_some_and(|t| t > end_s && t < end_s + 10.0),
+        "seed {seed}: {changes:?}"
+    );
+    mon
+}
+
+/// A MAF drift at idle with blips, 1 g/s per second from 30 s to 60 s. The drift is decided
+/// early, from a few seconds of idle, and each later refit of the decided error must describe
+/// the whole error since the onset: refits summed from short windows of compensated residuals
+/// wandered (a rate of +-50..130 units per second from a 0.3-s window) and the error taken out
+/// never matched the sensor's, so the fault did not heal within 10 s of its end (seeds 21 and
+/// 24 never healed). One DTC, passed within 10 s of the end.
+#[test]
+fn a_maf_drift_at_idle_is_refitted_whole_and_heals_after_its_end() {
+    for seed in 21..=25 {
+        let end_s = 60.0;
+        let mut sc = IntakeScenario::new(
+            "maf_drift_idle_heals",
+            90.0,
+            seed,
+            ProfileSpec::IdleBlips(IdleBlipsSpec::default()),
+            IntakeFault::None,
+        );
+        sc.fault = IntakeFaultSpec::ending(
+            IntakeFault::MafDrift {
+                start_s: 30.0,
+                rate_kg_s_per_s: 0.001,
+            },
+            end_s,
+        );
+        raised_once_and_healed(&sc, "maf_range_performance", end_s);
+    }
+}
+
+/// A healthy engine under 97.2 kPa of ambient pressure (the monitor's model assumes
+/// 101.3 kPa), driven with pedal ramps that reach high load with the EGR valve open, its plant
+/// and sensors off the model by the held-out ranges (the plant of held-out version 5's log 61,
+/// now a development log). The exhaust back-pressure upstream of the valve falls with the
+/// ambient, and near the end of the flow function the EGR flow falls steeply with it (17 % at
+/// 94 kPa in the manifold), so the MAF-only filter predicts a manifold pressure 1-2 kPa above
+/// the true one. Without an allowance for that in the pressure residual the healthy MAP was
+/// named 3 kPa low at 504 s. Nothing is raised.
+#[test]
+fn a_lower_ambient_pressure_raises_nothing_at_high_load_with_egr() {
+    for seed in [70061, 1, 2] {
+        let text = format!(
+            r#"
+name = "low_ambient_pedal_ramps"
+monitor = "intake"
+duration_s = 900.0
+seed = {seed}
+
+[profile]
+kind = "pedal_ramps"
+
+[plant]
+param_rel_error = 0.015137
+ve_error_rel = -0.003136
+ve_error_speed = -0.002678
+ve_error_pressure = 0.007309
+discharge_error_rel = 0.008711
+discharge_error_angle = 0.007372
+ambient_pressure_pa = 97233.1
+ambient_temperature_k = 296.077
+
+[sensors]
+map_noise_std_pa = 924.525
+maf_noise_rel = 0.015632
+map_gain = 0.995883
+map_offset_pa = 61.7314
+map_time_constant_s = 0.008618
+maf_gain = 1.0014
+maf_time_constant_s = 0.012039
+"#
+        );
+        let sc = IntakeScenario::from_toml_str(&text, "test").expect("scenario");
         let mut mon = monitor();
         let changes = feed(&mut mon, simulate(&sc));
-        let raised: Vec<&str> = raised(&changes)
-            .into_iter()
-            .filter(|e| *e != GROUP_EVENT)
-            .collect();
-        assert_eq!(
-            raised,
-            vec!["maf_range_performance"],
-            "seed {seed}: {changes:?}"
-        );
-        let heal = changes
-            .iter()
-            .find(|c| c.event == "maf_range_performance" && !c.failed)
-            .map(|c| c.t_s);
-        println!("seed {seed}: healed at {heal:?}");
-        assert!(
-            heal.is_some_and(|t| t > end_s && t < end_s + 10.0),
-            "seed {seed}: {changes:?}"
-        );
-        assert!(mon.decision().is_none(), "{:?}", mon.decision());
+        assert!(raised(&changes).is_empty(), "seed {seed}: {changes:?}");
     }
 }

@@ -144,7 +144,10 @@ pub struct IntakeMonitorConfig {
     pub transient_tolerance_s: f64,
     /// Uncertainty of the ambient pressure (Pa) in the throttle-model flow: away from choked
     /// flow the nozzle flow depends on the pressure ratio to an ambient the monitor does not
-    /// measure (weather and altitude move it by some kPa).
+    /// measure (weather and altitude move it by some kPa). The EGR valve's upstream (exhaust)
+    /// pressure moves with it in proportion, and its flow error enters the pressure residual's
+    /// allowance the same way (large with the valve open at high load, where the manifold
+    /// pressure nears the back-pressure).
     pub ambient_pressure_std_pa: f64,
     /// Learned corrections (like an ECU's adaptation): while no test fails and nothing is
     /// decided, the monitor learns the ratio of the air flow the MAP-only filter implies to the

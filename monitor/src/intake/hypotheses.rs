@@ -445,6 +445,19 @@ impl HypothesisBank {
 
     /// Best fit of every hypothesis, in bank order ([`ALL_FAULTS`]).
     pub fn fits(&self) -> [Fit; HYPOTHESES] {
+        self.fits_with(true)
+    }
+
+    /// The fit of one sensor's error without its drift forms (a step: offset and gain only),
+    /// or with them (`drift`). A refit of a decided sensor fault over all the data since its
+    /// onset takes a drift only where the evidence asked for one: under a slow sweep of the
+    /// operating point a gain error also looks like a drift, and a drift extrapolated past the
+    /// sweep's turn leaves an error growing in the wrong direction.
+    pub fn fit_form(&self, fault: IntakeFault, drift: bool) -> Fit {
+        self.fits_with(drift)[fault.index()]
+    }
+
+    fn fits_with(&self, drift: bool) -> [Fit; HYPOTHESES] {
         let one = |i: usize, nonneg: bool| -> (f64, f64) {
             if !(self.sgg[i] > 0.0) {
                 return (0.0, 0.0);
@@ -462,11 +475,11 @@ impl HypothesisBank {
             (t, b, c, 0.0)
         };
         let (t_r, r) = ramp_fit(&self.map_ramp);
-        if t_r > t_map {
+        if drift && t_r > t_map {
             (t_map, b, map_gain, map_rate) = (t_r, 0.0, 0.0, r);
         }
         if let Some((t, b2, r2)) =
-            two_fit([self.sgg[0], self.sgz[0]], self.map_ramp, self.map_ramp_x)
+            two_fit([self.sgg[0], self.sgz[0]], self.map_ramp, self.map_ramp_x).filter(|_| drift)
         {
             if t - MAP_GAIN_PENALTY > t_map {
                 (t_map, b, map_gain, map_rate) = (t - MAP_GAIN_PENALTY, b2, 0.0, r2);
@@ -477,14 +490,16 @@ impl HypothesisBank {
             (t, g, b, 0.0)
         };
         let (t_r, r) = ramp_fit(&self.maf_ramp);
-        if t_r > t_maf {
+        if drift && t_r > t_maf {
             (t_maf, g, maf_offset, maf_rate) = (t_r, 0.0, 0.0, r);
         }
         let (t_b, b_off) = ramp_fit(&[self.f22, self.f2z]);
         if t_b > t_maf {
             (t_maf, g, maf_offset, maf_rate) = (t_b, 0.0, b_off, 0.0);
         }
-        if let Some((t, b2, r2)) = two_fit([self.f22, self.f2z], self.maf_ramp, self.maf_ramp_x) {
+        if let Some((t, b2, r2)) =
+            two_fit([self.f22, self.f2z], self.maf_ramp, self.maf_ramp_x).filter(|_| drift)
+        {
             if t - MAP_GAIN_PENALTY > t_maf {
                 (t_maf, g, maf_offset, maf_rate) = (t - MAP_GAIN_PENALTY, 0.0, b2, r2);
             }

@@ -22,9 +22,11 @@
 //! Every residual's variance carries model-error allowances besides the filter's covariance and
 //! the sensor noise: a relative term (`pressure_model_rel`, `flow_model_rel`,
 //! `throttle_model_rel`), a transient term (`transient_tolerance_s` times the reading's rate of
-//! change: lags and dynamics known to a few milliseconds) and, in the throttle-model flow, the
-//! unknown ambient pressure (`ambient_pressure_std_pa`). Two corrections are learned while no
-//! test fails and nothing is decided, like an ECU's adaptation values: the ratio of the air
+//! change: lags and dynamics known to a few milliseconds) and the unknown ambient pressure
+//! (`ambient_pressure_std_pa`): in the throttle-model flow, and in the pressure residual
+//! through the EGR flow's error under the exhaust back-pressure that moves with it. Two
+//! corrections are learned while no test fails and nothing is decided, like an ECU's
+//! adaptation values: the ratio of the air
 //! flow the MAP-only filter implies to the MAF reading (volumetric-efficiency and MAF
 //! calibration errors; the MAF is multiplied by it before the filters) and, while the throttle
 //! is choked, the ratio of the MAF to the throttle model's flow (discharge, bore, ambient).
@@ -417,6 +419,12 @@ struct ResidualFault {
     raw_w: f64,
     /// Time (s) since the throttle-flow residual was last tested.
     raw_w_age_s: f64,
+    /// Sensor faults: the hypothesis bank from the fault's onset, fed since the decision with
+    /// the raw residuals (this fault's predicted effect added back). A refit of the decided
+    /// sensor error is this bank's fit: the whole error model (offset, gain, drift rate) from
+    /// the onset, rather than the sum of increments fitted on short windows of compensated
+    /// residuals, which wandered (a MAF gain refitted 0.30, -0.11, -0.41, 0.04 on one fault).
+    raw_bank: HypothesisBank,
 }
 
 /// An exponentially weighted ratio `sum num / sum den`, learned over a time constant.
@@ -1652,7 +1660,10 @@ impl IntakeMonitor {
                 _ => seg.map_pa,
             };
             let before = f.comp.magnitude(y);
-            f.comp.refine(&best, self.scan.best_bank(best.fault));
+            // The refit on this episode's compensated residuals, added to the decided size:
+            // what tells a fault that has gone (most of it taken back).
+            let mut increment = f.comp;
+            increment.refine(&best, self.scan.best_bank(best.fault));
             // A refit that takes back most of the decided error, leaving one within what the
             // residuals allow for anyway: the fault has healed.
             let allowed = match best.fault {
@@ -1674,7 +1685,7 @@ impl IntakeMonitor {
                     }
                 }
             };
-            if let (Some(b), Some(a)) = (before, f.comp.magnitude(y)) {
+            if let (Some(b), Some(a)) = (before, increment.magnitude(y)) {
                 if a < HEALED_FRACTION * b && a < 0.5 * allowed {
                     tracing::debug!(
                         time_s = now_s,
@@ -1689,6 +1700,20 @@ impl IntakeMonitor {
                     return;
                 }
             }
+            // Still there: a sensor's error is refitted whole, from its onset on the raw
+            // residuals; the other faults keep the increment.
+            f.comp = match best.fault {
+                IntakeFault::MapSensor | IntakeFault::MafSensor => {
+                    let drift = f.comp.rate != 0.0 || best.rate != 0.0;
+                    let whole = f.raw_bank.fit_form(best.fault, drift);
+                    if whole.glr > 0.0 {
+                        Compensation::new(&whole, &f.raw_bank)
+                    } else {
+                        increment
+                    }
+                }
+                IntakeFault::EgrValve | IntakeFault::Leak => increment,
+            };
             f.fit.parameter = f.comp.parameter;
             f.fit.gain = f.comp.gain;
             f.fit.offset = f.comp.offset;
@@ -1747,6 +1772,7 @@ impl IntakeMonitor {
             raw_p: 0.0,
             raw_w: 0.0,
             raw_w_age_s: 0.0,
+            raw_bank: *self.scan.best_bank(best.fault),
         });
         tracing::debug!(
             time_s = now_s,
@@ -1916,16 +1942,48 @@ impl IntakeMonitor {
             filters.pair.local2().state(),
             filters.pair.local2().covariance(),
         );
-        let s_p = (p_maf[(X_PMES, X_PMES)]
-            + self.r_map
-            + (self.cfg.pressure_model_rel * seg.map_pa).powi(2)
-            + map_trans)
-            .sqrt();
-        let z_p = (seg.map_pa - x_maf[X_PMES]) / s_p;
         let (x_map, p_map) = (
             filters.pair.local1().state(),
             filters.pair.local1().covariance(),
         );
+        // Linearized manifold response over this segment (for the hypothesis bank and the EGR
+        // allowance below). The flows a leak or the EGR would add are evaluated at the MAP-only
+        // local filter's pressure: it follows the true pressure under every fault but the MAP
+        // sensor's, whereas the centralized estimate is pulled off it by the very
+        // inconsistency being isolated (and near ambient those flows change fast with the
+        // pressure).
+        let p_true = x_map[X_PM];
+        let (slope, _) = self.model.vol_eff(seg.speed_rpm);
+        let egr_area = self.model.egr_area(seg.egr_cmd);
+        let (w_egr, d_egr) = if egr_area > 0.0 {
+            self.model.egr_flow_area(p_true, egr_area)
+        } else {
+            (0.0, 0.0)
+        };
+        let j = self.gain * (d_egr - slope);
+        // The EGR flow's share of the pressure allowance: the exhaust back-pressure upstream of
+        // the valve moves with the ambient pressure the monitor does not measure (and keeps
+        // its ratio to it), and near the end of the flow function, with the manifold pressure
+        // close to the back-pressure (open valve at high load), the flow changes steeply with
+        // it: 4 kPa less ambient takes about 17 % off the flow at p_m = 94 kPa. Its error moves
+        // the manifold pressure by the steady-state gain `1 / (slope - dW_egr/dp_m)` (Pa per
+        // kg/s). Without it a plant under 97 kPa ambient had its healthy MAP named 3 kPa low.
+        let params = self.model.params();
+        let p_egr = params.egr_upstream_pressure_pa;
+        let egr_p_std = if egr_area > 0.0 && slope > d_egr {
+            let dw_dpegr = (w_egr - d_egr * p_true) / p_egr;
+            let s_pegr = self.cfg.ambient_pressure_std_pa * p_egr / params.ambient_pressure_pa;
+            dw_dpegr * s_pegr / (slope - d_egr)
+        } else {
+            0.0
+        };
+        let s_p = (p_maf[(X_PMES, X_PMES)]
+            + self.r_map
+            + (self.cfg.pressure_model_rel * seg.map_pa).powi(2)
+            + egr_p_std.powi(2)
+            + map_trans)
+            .sqrt();
+        let z_p = (seg.map_pa - x_maf[X_PMES]) / s_p;
         let s_x = (p_map[(X_WMES, X_WMES)]
             + maf_noise
             + (self.cfg.flow_model_rel * maf_f).powi(2)
@@ -1996,20 +2054,6 @@ impl IntakeMonitor {
             },
         });
 
-        // Linearized manifold response over this segment (for the hypothesis bank). The flows
-        // a leak or the EGR would add are evaluated at the MAP-only local filter's pressure: it
-        // follows the true pressure under every fault but the MAP sensor's, whereas the
-        // centralized estimate is pulled off it by the very inconsistency being isolated (and
-        // near ambient those flows change fast with the pressure).
-        let p_true = x_map[X_PM];
-        let (slope, _) = self.model.vol_eff(seg.speed_rpm);
-        let egr_area = self.model.egr_area(seg.egr_cmd);
-        let d_egr = if egr_area > 0.0 {
-            self.model.egr_flow_area(p_true, egr_area).1
-        } else {
-            0.0
-        };
-        let j = self.gain * (d_egr - slope);
         let z = j * dt;
         let record = SegmentRecord {
             z_p,
@@ -2080,6 +2124,13 @@ impl IntakeMonitor {
                 f.raw_w_age_s = 0.0;
             } else {
                 f.raw_w_age_s += dt;
+            }
+            if matches!(f.fit.fault, IntakeFault::MapSensor | IntakeFault::MafSensor) {
+                f.raw_bank.push(&SegmentRecord {
+                    z_p: z_p_c + c.0 / s_p,
+                    z_w: z_flow_c + c.1 / s_w,
+                    ..raw
+                });
             }
             f.heal_llr = (f.heal_llr + inc).clamp(0.0, 2.0 * heal_thr);
             let raw_quiet =
