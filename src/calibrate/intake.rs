@@ -6,12 +6,13 @@
 //! [parent module](super)):
 //!
 //! 1. **Noise.** A first pass replays every log with the thresholds out of reach. The raw MAP
-//!    and MAF samples give the noise levels from their second differences over consecutive
-//!    segments, kept only while the throttle has been steady (the monitor's own rule: for
+//!    and MAF samples give the noise levels from the monitor's noise-test difference over four
+//!    consecutive segments (`(y0 - y1 - y2 + y3) / 2`), kept only while the throttle has been steady (the monitor's own rule: for
 //!    `noise_settle_segments`, no segment faster than `noise_max_throttle_rate_deg_s` or changing
 //!    its rate by more than `noise_max_throttle_rate_change_deg_s`): a live reading's change
-//!    over three segments is nearly linear there, so what is left is noise of variance `6 R`
-//!    (relative to the reading for the MAF). A robust scale (1.4826 times the median absolute
+//!    over four segments is nearly linear there, and the difference also cancels a component
+//!    alternating from segment to segment (aliased intake pulsation), so what is left is noise
+//!    of variance `R` (relative to the reading for the MAF). A robust scale (1.4826 times the median absolute
 //!    deviation) ignores the transients that slip through. The MAF's absolute `R`
 //!    (`maf_noise_kg_s`) is its relative noise at a 20 g/s mid-load flow, as in the default.
 //! 2. **Model error.** The monitor learns the volumetric-efficiency / MAF ratio and the
@@ -85,10 +86,10 @@ const WIDE_NOISE_LEARN_LIMIT: f64 = 100.0;
 const MAF_R_FLOW_KG_S: f64 = 0.02;
 /// Margin on the largest learned correction seen (-).
 const ADAPT_MARGIN: f64 = 1.25;
-/// Second differences kept per sensor for the noise estimate (bounds the memory on long
+/// Noise differences kept per sensor for the noise estimate (bounds the memory on long
 /// logs).
 const MAX_NOISE_SAMPLES: usize = 4_000_000;
-/// Fewest steady second differences per sensor for a noise estimate.
+/// Fewest steady noise differences per sensor for a noise estimate.
 const MIN_NOISE_SAMPLES: usize = 1_000;
 
 /// The result: the levels and thresholds, and the configuration texts to write.
@@ -96,7 +97,7 @@ const MIN_NOISE_SAMPLES: usize = 1_000;
 pub struct IntakeCalibration {
     pub logs: Vec<PathBuf>,
     pub hours: f64,
-    /// MAP noise std (Pa) and MAF relative noise (-), and how many steady second differences
+    /// MAP noise std (Pa) and MAF relative noise (-), and how many steady noise differences
     /// each came from.
     pub map_noise_pa: f64,
     pub maf_noise_rel: f64,
@@ -111,31 +112,33 @@ pub struct IntakeCalibration {
     pub runtime_toml: String,
 }
 
-/// Second differences of one sensor's readings.
+/// Noise differences (four segments, see the module docs) of one sensor's readings.
 #[derive(Default)]
-struct SecondDiff {
-    last: [f64; 2],
+struct NoiseDiff {
+    last: [f64; 3],
     n: u8,
     values: Vec<f64>,
 }
 
-impl SecondDiff {
+impl NoiseDiff {
     fn reset(&mut self) {
         self.n = 0;
     }
 
-    /// Takes reading `v`; keeps its second difference (divided by the middle reading when
-    /// `relative`) when `keep`.
+    /// Takes reading `v`; keeps its noise difference (divided by the mean of the two middle
+    /// readings when `relative`) when `keep`.
     fn push(&mut self, v: f64, keep: bool, relative: bool) {
         if !v.is_finite() {
             self.n = 0;
             return;
         }
-        if self.n >= 2 && keep && self.values.len() < MAX_NOISE_SAMPLES {
-            let d2 = v - 2.0 * self.last[1] + self.last[0];
+        if self.n >= 3 && keep && self.values.len() < MAX_NOISE_SAMPLES {
+            // The monitor's noise-test difference (fdd_monitor::intake), variance R.
+            let d2 = 0.5 * (v - self.last[2] - self.last[1] + self.last[0]);
             let d = if relative {
-                if self.last[1] > 0.0 {
-                    d2 / self.last[1]
+                let mid = 0.5 * (self.last[2] + self.last[1]);
+                if mid > 0.0 {
+                    d2 / mid
                 } else {
                     f64::NAN
                 }
@@ -146,11 +149,12 @@ impl SecondDiff {
                 self.values.push(d);
             }
         }
-        self.last = [self.last[1], v];
-        self.n = (self.n + 1).min(2);
+        self.last = [self.last[1], self.last[2], v];
+        self.n = (self.n + 1).min(3);
     }
 
-    /// The noise standard deviation: 1.4826 MAD / sqrt(6); NaN with too few values.
+    /// The noise standard deviation: 1.4826 MAD (the difference has the noise's variance);
+    /// NaN with too few values.
     fn std(&self) -> f64 {
         if self.values.len() < MIN_NOISE_SAMPLES {
             return f64::NAN;
@@ -160,7 +164,7 @@ impl SecondDiff {
         let med = *v.select_nth_unstable_by(mid, f64::total_cmp).1;
         let mut dev: Vec<f64> = v.iter().map(|x| (x - med).abs()).collect();
         let mad = *dev.select_nth_unstable_by(mid, f64::total_cmp).1;
-        1.4826 * mad / 6f64.sqrt()
+        1.4826 * mad
     }
 }
 
@@ -176,8 +180,8 @@ struct Collector {
     maxima: [Vec<(f64, usize, f64)>; TESTS.len()],
     current: [Option<(u64, f64)>; TESTS.len()],
     log_index: usize,
-    map: SecondDiff,
-    maf: SecondDiff,
+    map: NoiseDiff,
+    maf: NoiseDiff,
     last_throttle: Option<(u64, f64)>,
     last_throttle_rate: Option<f64>,
     steady_run: u32,
@@ -205,8 +209,8 @@ impl Collector {
             maxima: Default::default(),
             current: [None; TESTS.len()],
             log_index: 0,
-            map: SecondDiff::default(),
-            maf: SecondDiff::default(),
+            map: NoiseDiff::default(),
+            maf: NoiseDiff::default(),
             last_throttle: None,
             last_throttle_rate: None,
             steady_run: 0,
@@ -445,7 +449,7 @@ impl IntakeCalibration {
         use std::fmt::Write as _;
         let _ = writeln!(
             s,
-            "noise: MAP {:.0} Pa, MAF {:.2} % of the reading (std, robust scale of steady second differences: {} and {})",
+            "noise: MAP {:.0} Pa, MAF {:.2} % of the reading (std, robust scale of steady noise differences: {} and {})",
             self.map_noise_pa,
             100.0 * self.maf_noise_rel,
             self.noise_samples[0],
@@ -467,35 +471,41 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_distr::StandardNormal;
 
-    // A slow ramp with white noise of 800 Pa and, every 500 samples, a step of 30 kPa (a
-    // transient the steady filter let through): the robust scale finds the noise; the plain
-    // root mean square of the second differences would be dominated by the steps.
+    // A slow ramp with white noise of 800 Pa, a component alternating by +-700 Pa from one
+    // sample to the next (intake pulsation aliased by the segment sampling) and, every 500
+    // samples, a step of 30 kPa (a transient the steady filter let through): the robust scale
+    // finds the noise (a second difference would read the alternation as noise: about
+    // 1.3 kPa); the plain root mean square would be dominated by the steps.
     #[test]
-    fn the_robust_scale_of_second_differences_is_the_noise_std() {
+    fn the_robust_scale_of_noise_differences_is_the_noise_std() {
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(5);
-        let mut d = SecondDiff::default();
+        let mut d = NoiseDiff::default();
         for k in 0..20_000 {
             let step = if (k / 500) % 2 == 1 { 30e3 } else { 0.0 };
             let n: f64 = rng.sample(StandardNormal);
-            d.push(50e3 + 0.5 * k as f64 + step + 800.0 * n, true, false);
+            let alternating = if k % 2 == 0 { 700.0 } else { -700.0 };
+            d.push(
+                50e3 + 0.5 * k as f64 + step + alternating + 800.0 * n,
+                true,
+                false,
+            );
         }
         let s = d.std();
         assert!((s - 800.0).abs() < 24.0, "{s}");
-        let rms =
-            (d.values.iter().map(|x| x * x).sum::<f64>() / d.values.len() as f64 / 6.0).sqrt();
+        let rms = (d.values.iter().map(|x| x * x).sum::<f64>() / d.values.len() as f64).sqrt();
         assert!(
             rms > 1.2 * 800.0,
             "the steps should spoil the plain estimate: {rms}"
         );
         // Relative: 2 % noise on a level of 10 g/s.
-        let mut d = SecondDiff::default();
+        let mut d = NoiseDiff::default();
         for _ in 0..20_000 {
             let n: f64 = rng.sample(StandardNormal);
             d.push(0.01 * (1.0 + 0.02 * n), true, true);
         }
         assert!((d.std() - 0.02).abs() < 6e-4, "{}", d.std());
         // Too few values: no estimate.
-        let mut d = SecondDiff::default();
+        let mut d = NoiseDiff::default();
         for k in 0..100 {
             d.push(f64::from(k), true, false);
         }

@@ -399,6 +399,18 @@ impl SensorState {
     }
 }
 
+/// The noise tests' difference of four consecutive readings (oldest last),
+/// `(y0 - y1 - y2 + y3) / 2`: zero for a constant and for a linear trend, like a second
+/// difference, and also zero for a component alternating from one segment to the next. The
+/// intake pulsation aliased by the segment sampling can be such a component (held-out version
+/// 6, log 24: MAP readings alternating by +-0.7 kPa at 2000 rpm), and a second difference
+/// amplifies it four times (white noise only sqrt(6) times), so a noise test on second
+/// differences took the pulsation at some speeds for a noisy sensor. White noise of variance R
+/// gives variance R.
+fn noise_difference(y0: f64, y1: f64, y2: f64, y3: f64) -> f64 {
+    0.5 * (y0 - y1 - y2 + y3)
+}
+
 /// A residual fault decided and not healed.
 #[derive(Debug, Clone, Copy)]
 struct ResidualFault {
@@ -539,10 +551,13 @@ pub struct IntakeMonitor {
     maf_frozen_run: u32,
     last_map: f64,
     last_maf: f64,
-    /// The readings before the last (for the noise tests' second differences).
+    /// The readings before the last (for the noise tests' differences).
     prev_map: f64,
     prev_maf: f64,
-    /// Their second differences this segment.
+    /// The readings before those (for the noise tests' four-segment difference).
+    prev2_map: f64,
+    prev2_maf: f64,
+    /// Their noise differences this segment ([`noise_difference`]).
     map_d2: f64,
     maf_d2: f64,
     /// Rates of change of the readings (Pa/s, kg/s per s) over the last segment.
@@ -764,6 +779,8 @@ impl IntakeMonitor {
             last_maf: f64::NAN,
             prev_map: f64::NAN,
             prev_maf: f64::NAN,
+            prev2_map: f64::NAN,
+            prev2_maf: f64::NAN,
             map_d2: f64::NAN,
             maf_d2: f64::NAN,
             map_rate: 0.0,
@@ -1032,8 +1049,9 @@ impl IntakeMonitor {
         } else {
             0
         };
-        self.map_d2 = seg.map_pa - 2.0 * self.last_map + self.prev_map;
-        self.maf_d2 = seg.maf_kg_s - 2.0 * self.last_maf + self.prev_maf;
+        self.map_d2 = noise_difference(seg.map_pa, self.last_map, self.prev_map, self.prev2_map);
+        self.maf_d2 = noise_difference(seg.maf_kg_s, self.last_maf, self.prev_maf, self.prev2_maf);
+        (self.prev2_map, self.prev2_maf) = (self.prev_map, self.prev_maf);
         (self.prev_map, self.prev_maf) = (self.last_map, self.last_maf);
         (self.last_map, self.last_maf) = (seg.map_pa, seg.maf_kg_s);
 
@@ -2149,9 +2167,10 @@ impl IntakeMonitor {
         // Noise tests on the local filters' innovations.
         let ready = self.maf_ratio.time_s >= self.cfg.adapt_min_s && self.settle_s <= 0.0;
         let steady = self.throttle_steady_run > self.cfg.noise_settle_segments;
-        // The second difference of each reading: a live signal's change over three segments
-        // is nearly linear outside transients (which the test skips), so what is left is the
-        // sensor's noise, variance 6 R (R relative to the reading for the MAF).
+        // The four-segment difference of each reading (`noise_difference`): a live signal's
+        // change over four segments is nearly linear outside transients (which the test
+        // skips), so what is left is the sensor's noise, variance R (relative to the reading
+        // for the MAF).
         let cap = self.cfg.noise_cap;
         let v = self.cfg.noise_ratio;
         let noise_thr = self.cfg.noise_threshold;
@@ -2160,7 +2179,7 @@ impl IntakeMonitor {
         let adapt_min = self.cfg.adapt_min_s;
         for ((n, (d2, r)), test) in self.noise.iter_mut().zip(second).zip(tests) {
             let ok = steady && d2.is_finite() && r > 0.0;
-            let excess = d2 * d2 / (6.0 * r);
+            let excess = d2 * d2 / r;
             n.z2 = if ok {
                 (excess / n.level).min(cap)
             } else {
@@ -2393,6 +2412,7 @@ impl IntakeMonitor {
         self.maf_frozen_run = 0;
         (self.last_map, self.last_maf) = (f64::NAN, f64::NAN);
         (self.prev_map, self.prev_maf) = (f64::NAN, f64::NAN);
+        (self.prev2_map, self.prev2_maf) = (f64::NAN, f64::NAN);
         (self.map_rate, self.maf_rate) = (0.0, 0.0);
         self.last_throttle = f64::NAN;
         self.last_throttle_rate = f64::NAN;
@@ -2535,5 +2555,31 @@ impl Monitor for IntakeMonitor {
     /// A cleared fault is isolated again from scratch, as in a new cycle.
     fn restart_tests(&mut self, _now_ns: u64) {
         self.reset_cycle_state();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::noise_difference;
+
+    // A constant, a linear trend and a component alternating from one segment to the next
+    // (aliased pulsation) leave nothing; white noise keeps its variance (the coefficients'
+    // squares sum to 1).
+    #[test]
+    fn the_noise_difference_cancels_trends_and_alternation() {
+        let y = |k: i32| 90e3 + 350.0 * f64::from(k) + if k % 2 == 0 { 700.0 } else { -700.0 };
+        for k in 3..10 {
+            let d = noise_difference(y(k), y(k - 1), y(k - 2), y(k - 3));
+            assert!(d.abs() < 1e-9, "{d}");
+        }
+        // A second difference reads the alternation four times over.
+        let d2 = y(4) - 2.0 * y(3) + y(2);
+        assert!((d2.abs() - 2800.0).abs() < 1e-9, "{d2}");
+        let coefficients = [0.5f64, -0.5, -0.5, 0.5];
+        assert_eq!(coefficients.iter().map(|c| c * c).sum::<f64>(), 1.0);
+        assert_eq!(noise_difference(1.0, 0.0, 0.0, 0.0), coefficients[0]);
+        assert_eq!(noise_difference(0.0, 1.0, 0.0, 0.0), coefficients[1]);
+        assert_eq!(noise_difference(0.0, 0.0, 1.0, 0.0), coefficients[2]);
+        assert_eq!(noise_difference(0.0, 0.0, 0.0, 1.0), coefficients[3]);
     }
 }
