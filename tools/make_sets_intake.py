@@ -11,12 +11,12 @@ script would write.
 
 How the sets differ (also in fixtures/sets/README.md):
 
-- **seeds**: the tuning set's scenario seeds are 10000 + i, the held-out set's 80000 + i, and
+- **seeds**: the tuning set's scenario seeds are 10000 + i, the held-out set's 90000 + i, and
   every random choice below is drawn from a generator of its own per set (seed 1, and 9 for
-  the tuning set's small-faults block; 11 for the held-out set); the held-out set is version 6:
+  the tuning set's small-faults block; 12 for the held-out set); the held-out set is version 7:
   version 1 (seeds 20000 + i, generator seed 2), version 2 (30000 + i, seed 3), version 3
-  (40000 + i, seed 4), version 4 (50000 + i, seed 5) and version 5 (70000 + i, seed 10) were
-  each evaluated once and are retired;
+  (40000 + i, seed 4), version 4 (50000 + i, seed 5), version 5 (70000 + i, seed 10) and
+  version 6 (80000 + i, seed 11) were each evaluated once and are retired;
 - **drive styles**: tuning drives `mixed`, `tip_in_out` (EGR 0.2..0.4 in the tip-outs),
   `steady_holds` and `idle`; held-out drives `pedal_ramps`, `idle_blips` and `speed_sweep`,
   which the tuning set never sees;
@@ -301,7 +301,7 @@ def all_sets():
     )
     tuning.update(small_faults_block(len(tuning)))
     heldout = make_set(
-        "held", random.Random(11), 80000, 3, HELDOUT_STYLES, "idle_blips", (600.0, 720.0),
+        "held", random.Random(12), 90000, 3, HELDOUT_STYLES, "idle_blips", (600.0, 720.0),
         (90.0, 180.0),
         nominal=[(4, "pedal_ramps", (900.0, 900.0)), (2, "idle_blips", (900.0, 900.0)),
                  (2, "speed_sweep", (900.0, 900.0))],
