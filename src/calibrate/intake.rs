@@ -7,13 +7,14 @@
 //!
 //! 1. **Noise.** A first pass replays every log with the thresholds out of reach. The raw MAP
 //!    and MAF samples give the noise levels from the monitor's noise-test difference over four
-//!    consecutive segments (`(y0 - y1 - y2 + y3) / 2`), kept only while the throttle has been steady (the monitor's own rule: for
+//!    consecutive segments (`fdd_monitor::intake::noise_difference`, `(y0 - y1 - y2 + y3) /
+//!    2`), kept only while the throttle has been steady (the monitor's own rule: for
 //!    `noise_settle_segments`, no segment faster than `noise_max_throttle_rate_deg_s` or changing
 //!    its rate by more than `noise_max_throttle_rate_change_deg_s`): a live reading's change
 //!    over four segments is nearly linear there, and the difference also cancels a component
 //!    alternating from segment to segment (aliased intake pulsation), so what is left is noise
-//!    of variance `R` (relative to the reading for the MAF). A robust scale (1.4826 times the median absolute
-//!    deviation) ignores the transients that slip through. The MAF's absolute `R`
+//!    of variance `R` (relative to the reading for the MAF). A robust scale (1.4826 times the
+//!    median absolute deviation) ignores the transients that slip through. The MAF's absolute `R`
 //!    (`maf_noise_kg_s`) is its relative noise at a 20 g/s mid-load flow, as in the default.
 //! 2. **Model error.** The monitor learns the volumetric-efficiency / MAF ratio and the
 //!    throttle discharge ratio online (`maf_correction`, `throttle_correction`), each within
@@ -33,6 +34,7 @@ use std::path::{Path, PathBuf};
 
 use fdd_diagnostics::Verdict;
 use fdd_monitor::config::{IntakeConfig, DEFAULT_INTAKE_TOML};
+use fdd_monitor::intake::noise_difference;
 use fdd_monitor::monitor::Output;
 use fdd_monitor::runtime::config::TruthConfig;
 use fdd_monitor::runtime::Runtime;
@@ -133,17 +135,16 @@ impl NoiseDiff {
             return;
         }
         if self.n >= 3 && keep && self.values.len() < MAX_NOISE_SAMPLES {
-            // The monitor's noise-test difference (fdd_monitor::intake), variance R.
-            let d2 = 0.5 * (v - self.last[2] - self.last[1] + self.last[0]);
+            let d = noise_difference(v, self.last[2], self.last[1], self.last[0]);
             let d = if relative {
                 let mid = 0.5 * (self.last[2] + self.last[1]);
                 if mid > 0.0 {
-                    d2 / mid
+                    d / mid
                 } else {
                     f64::NAN
                 }
             } else {
-                d2
+                d
             };
             if d.is_finite() {
                 self.values.push(d);

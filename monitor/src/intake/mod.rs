@@ -406,8 +406,8 @@ impl SensorState {
 /// 6, log 24: MAP readings alternating by +-0.7 kPa at 2000 rpm), and a second difference
 /// amplifies it four times (white noise only sqrt(6) times), so a noise test on second
 /// differences took the pulsation at some speeds for a noisy sensor. White noise of variance R
-/// gives variance R.
-fn noise_difference(y0: f64, y1: f64, y2: f64, y3: f64) -> f64 {
+/// gives variance R. `fdd calibrate` estimates the noise levels with the same difference.
+pub fn noise_difference(y0: f64, y1: f64, y2: f64, y3: f64) -> f64 {
     0.5 * (y0 - y1 - y2 + y3)
 }
 
@@ -558,8 +558,8 @@ pub struct IntakeMonitor {
     prev2_map: f64,
     prev2_maf: f64,
     /// Their noise differences this segment ([`noise_difference`]).
-    map_d2: f64,
-    maf_d2: f64,
+    map_noise_diff: f64,
+    maf_noise_diff: f64,
     /// Rates of change of the readings (Pa/s, kg/s per s) over the last segment.
     map_rate: f64,
     maf_rate: f64,
@@ -781,8 +781,8 @@ impl IntakeMonitor {
             prev_maf: f64::NAN,
             prev2_map: f64::NAN,
             prev2_maf: f64::NAN,
-            map_d2: f64::NAN,
-            maf_d2: f64::NAN,
+            map_noise_diff: f64::NAN,
+            maf_noise_diff: f64::NAN,
             map_rate: 0.0,
             maf_rate: 0.0,
             last_throttle: f64::NAN,
@@ -1049,8 +1049,10 @@ impl IntakeMonitor {
         } else {
             0
         };
-        self.map_d2 = noise_difference(seg.map_pa, self.last_map, self.prev_map, self.prev2_map);
-        self.maf_d2 = noise_difference(seg.maf_kg_s, self.last_maf, self.prev_maf, self.prev2_maf);
+        self.map_noise_diff =
+            noise_difference(seg.map_pa, self.last_map, self.prev_map, self.prev2_map);
+        self.maf_noise_diff =
+            noise_difference(seg.maf_kg_s, self.last_maf, self.prev_maf, self.prev2_maf);
         (self.prev2_map, self.prev2_maf) = (self.prev_map, self.prev_maf);
         (self.prev_map, self.prev_maf) = (self.last_map, self.last_maf);
         (self.last_map, self.last_maf) = (seg.map_pa, seg.maf_kg_s);
@@ -2164,7 +2166,7 @@ impl IntakeMonitor {
             self.scan.push(k, &record);
         }
 
-        // Noise tests on the local filters' innovations.
+        // Noise tests on each reading's own differences.
         let ready = self.maf_ratio.time_s >= self.cfg.adapt_min_s && self.settle_s <= 0.0;
         let steady = self.throttle_steady_run > self.cfg.noise_settle_segments;
         // The four-segment difference of each reading (`noise_difference`): a live signal's
@@ -2174,12 +2176,15 @@ impl IntakeMonitor {
         let cap = self.cfg.noise_cap;
         let v = self.cfg.noise_ratio;
         let noise_thr = self.cfg.noise_threshold;
-        let second = [(self.map_d2, self.r_map), (self.maf_d2, maf_noise)];
+        let diffs = [
+            (self.map_noise_diff, self.r_map),
+            (self.maf_noise_diff, maf_noise),
+        ];
         let tests = ["intake_map_noise", "intake_maf_noise"];
         let adapt_min = self.cfg.adapt_min_s;
-        for ((n, (d2, r)), test) in self.noise.iter_mut().zip(second).zip(tests) {
-            let ok = steady && d2.is_finite() && r > 0.0;
-            let excess = d2 * d2 / r;
+        for ((n, (d, r)), test) in self.noise.iter_mut().zip(diffs).zip(tests) {
+            let ok = steady && d.is_finite() && r > 0.0;
+            let excess = d * d / r;
             n.z2 = if ok {
                 (excess / n.level).min(cap)
             } else {
