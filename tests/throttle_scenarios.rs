@@ -554,6 +554,52 @@ fn a_healthy_plate_resting_on_the_open_stop_is_not_named_stuck() {
     assert_eq!(v["monitors"][0]["false_dtcs"], 0, "{v}");
 }
 
+// A TPS that sticks during a steady hold, on holds whose levels lie a few degrees apart (the
+// plate wanders about the hold by its process noise): a frozen TPS was named only when the
+// static map moved `driven_range_deg` (8 deg), 25.9 s after the onset (retired held-out version
+// 8, log 12, whose scenario this is, cut at 440 s). A frozen reading is itself the evidence, and
+// its drive (`frozen_driven_range_deg`, 3 deg) only says the plate has left it: P0121 within
+// half a second.
+const THROTTLE_STUCK_ON_HOLDS: &str = r#"name = "throttle_stuck_on_holds"
+monitor = "throttle"
+duration_s = 440.0
+seed = 19012
+
+[excitation]
+kind = "steady_holds"
+
+[sensors]
+wattmeter_noise_std_w = 0.45
+tps_noise_std_v = 0.005
+tps_gain = 0.985754
+tps_offset_v = 0.009023
+wattmeter_gain = 0.950485
+tps_lag_s = 0.002
+wattmeter_lag_s = 0.003
+
+[plant]
+table1_rel_error = 0.015
+table1_max_draws = 500
+stop_restitution = 0.1
+process_noise_scale = 0.5
+
+[fault]
+kind = "tps_stuck"
+start_s = 428.0
+"#;
+
+#[test]
+fn a_tps_stuck_on_a_hold_is_named_without_waiting_for_a_large_move() {
+    let v = evaluate("throttle_stuck_on_holds", THROTTLE_STUCK_ON_HOLDS);
+    let log = &v["logs"][0];
+    let stuck = first_dtc_s(log, "P0121");
+    assert!(
+        stuck.is_some_and(|t| (428.0..429.5).contains(&t)),
+        "P0121 within 1.5 s of the onset at 428 s: {log}"
+    );
+    assert_eq!(v["monitors"][0]["false_dtcs"], 0, "{v}");
+}
+
 /// A scenario of the tuning set's healing block (`fixtures/sets/throttle_tuning/<file>`).
 fn tuning_scenario(file: &str) -> String {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))

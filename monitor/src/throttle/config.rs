@@ -146,6 +146,12 @@ pub struct ThrottleMonitorConfig {
     pub motion_window_s: f64,
     pub static_tps_range_deg: f64,
     pub driven_range_deg: f64,
+    /// The same drive for a frozen TPS (identical readings, which a healthy sensor's noise
+    /// never gives): 3 deg, less than the plate test's, since the frozen reading is itself the
+    /// evidence and the drive only says the plate has left it (a stuck TPS is observable from
+    /// 1.8 deg). With `driven_range_deg` a stuck TPS on holds a few degrees apart waited for a
+    /// larger move (retired held-out sets, steady holds: 4 to 26 s).
+    pub frozen_driven_range_deg: f64,
     /// The plate is stuck when that holds for this long without a break (s): long enough for
     /// a healthy plate leaving its closed stop to catch up with the static map (friction and
     /// the return spring's preload hold it for a moment above the breakaway voltage).
@@ -228,6 +234,7 @@ impl Default for ThrottleMonitorConfig {
             motion_window_s: 0.2,
             static_tps_range_deg: 1.0,
             driven_range_deg: 8.0,
+            frozen_driven_range_deg: 3.0,
             plate_persist_s: 0.3,
             heal_s: 5.0,
             heal_agreement_deg: 4.0,

@@ -28,8 +28,8 @@
 //! Decision: an open circuit / short is a rail reading the model calls implausible that lasts
 //! `rail_persist_s`; shorter episodes are dropouts, and `intermittent_count` of them within
 //! `intermittent_window_s` make an intermittent circuit. A TPS frozen while the voltage should
-//! move the plate, for `plate_persist_s`, is a stuck TPS (P0121); a TPS static (not frozen) while
-//! driven, as long, is a stuck plate (P2119). When a residual test fails, the monitor waits
+//! move the plate by `frozen_driven_range_deg`, for `plate_persist_s`, is a stuck TPS (P0121); a
+//! TPS static (not frozen) while driven by `driven_range_deg`, as long, is a stuck plate (P2119). When a residual test fails, the monitor waits
 //! `decision_window_s` for the other tests (and for the plate test while it is counting), then
 //! names the fault: frozen TPS -> TPS stuck; only the combined wattmeter test, confirmed
 //! `watt_confirm_alarms` times within `watt_confirm_s`, and the wattmeter-only test alarming
@@ -381,6 +381,7 @@ impl ThrottleMonitor {
             ("noise_time_constant_s", cfg.noise_time_constant_s),
             ("fallback_r_scale", cfg.fallback_r_scale),
             ("plate_persist_s", cfg.plate_persist_s),
+            ("frozen_driven_range_deg", cfg.frozen_driven_range_deg),
             ("watt_confirm_s", cfg.watt_confirm_s),
             ("tps_step_sigma", cfg.tps_step_sigma),
             ("heal_agreement_deg", cfg.heal_agreement_deg),
@@ -734,7 +735,10 @@ impl ThrottleMonitor {
     /// The TPS has not moved by `static_tps_range_deg` over the motion window while the
     /// applied voltage should have moved the plate: its static map spanned more than
     /// `driven_range_deg`, or holds the plate that far from the TPS angle.
-    fn static_while_driven(&self) -> bool {
+    /// Whether the TPS stays put while the voltage's static map spans more than `driven_deg`
+    /// over the motion window, or sits more than that away from the TPS angle (off the end
+    /// stops by `driven_range_deg`).
+    fn static_while_driven(&self, driven_deg: f64) -> bool {
         // A TPS at a rail (an open or shorted line reads like a plate at its stop) is left to
         // the circuit checks. At a rail means for `rail_persist_s` in a row: a healthy TPS a
         // little offset at a stop dips into the rail band now and then by its noise, and a
@@ -753,12 +757,11 @@ impl ThrottleMonitor {
         let margin = self.cfg.driven_range_deg;
         let away = match (self.eq_hist.last(), self.tps_hist.last()) {
             (Some(eq), Some(tps)) => {
-                (eq - tps).abs() > margin && tps > lo + margin && tps < hi - margin
+                (eq - tps).abs() > driven_deg && tps > lo + margin && tps < hi - margin
             }
             _ => false,
         };
-        let driven =
-            (self.eq_hist.full() && self.eq_hist.span() > self.cfg.driven_range_deg) || away;
+        let driven = (self.eq_hist.full() && self.eq_hist.span() > driven_deg) || away;
         static_tps && driven
     }
 
@@ -921,7 +924,7 @@ impl ThrottleMonitor {
         let frozen_driven = self.tps_fault.is_none()
             && self.plate_fault.is_none()
             && self.frozen_run >= self.cfg.frozen_samples
-            && self.static_while_driven();
+            && self.static_while_driven(self.cfg.frozen_driven_range_deg);
         self.frozen_driven_run = if frozen_driven {
             self.frozen_driven_run + 1
         } else {
@@ -945,7 +948,7 @@ impl ThrottleMonitor {
         // the TPS noise, and a counter reset at every miss never got there (a plate stuck for
         // 40 s on steady holds went undetected).
         let trusted = self.tps_fault.is_none() && self.plate_fault.is_none();
-        let static_now = trusted && self.static_while_driven();
+        let static_now = trusted && self.static_while_driven(self.cfg.driven_range_deg);
         self.static_run = if static_now {
             self.static_run + 1
         } else if trusted {
