@@ -367,7 +367,7 @@ def calibration():
     30-minute fault-free log to calibrate on (`throttle_calibrate_train/`) and logs of the same
     plant (`plant.seed`) with other seeds, excitation styles and fault sizes 0.75-1.5x to judge
     the calibrated and the default configuration on (`throttle_calibrate_heldout/`)."""
-    rng = random.Random(24)
+    rng = random.Random(25)
     sensors = {
         "wattmeter_noise_std_w": 0.6,
         "tps_noise_std_v": 0.008,
@@ -392,14 +392,14 @@ def calibration():
     held = []
     styles = ["pulse_train", "chirp", "pedal_ramps", "steady_holds", "idle_blips"]
     n = 0
-    # Version 4 (seeds 3400+, random.Random(24); the plant of the issue's example: Table I
+    # Version 5 (seeds 3500+, random.Random(25); the plant of the issue's example: Table I
     # 20 % off, wattmeter 0.6 W): 20 fault-free drives of 30 min (10 h) and 9 fault kinds x 3.
-    # Version 3 (seeds 3300+, random.Random(23), the same plant), version 2 (seeds 3200+,
+    # Version 4 (seeds 3400+, random.Random(24), the same plant), version 3 (seeds 3300+, random.Random(23), the same plant), version 2 (seeds 3200+,
     # random.Random(22), Table I 2 %, wattmeter 0.9 W) and version 1 (seeds 3100+, 2 drives and
     # 9 x 2, random.Random(21)) were evaluated once and are retired.
     for i in range(20):
         name = "throttle_calibrate_heldout_%02d_nominal" % n
-        held.append((name, scenario(name, 3400 + n, 1800, {"kind": styles[n % len(styles)]},
+        held.append((name, scenario(name, 3500 + n, 1800, {"kind": styles[n % len(styles)]},
                                     sensors, plant, {"kind": "none"},
                                     comment="calibration held-out: 30 min fault-free")))
         n += 1
@@ -409,7 +409,7 @@ def calibration():
             scale = rng.uniform(0.75, 1.5)
             f = fault_table(rng, kind, start, scale)
             name = "throttle_calibrate_heldout_%02d_%s" % (n, kind)
-            held.append((name, scenario(name, 3400 + n, start + 60,
+            held.append((name, scenario(name, 3500 + n, start + 60,
                                         {"kind": styles[n % len(styles)]}, sensors, plant, f,
                                         comment="calibration held-out: %s from %g s, size x%.2f"
                                         % (kind, start, scale))))
