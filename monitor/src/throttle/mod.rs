@@ -29,7 +29,8 @@
 //! `rail_persist_s`; shorter episodes are dropouts, and `intermittent_count` of them within
 //! `intermittent_window_s` make an intermittent circuit. A TPS frozen while the voltage should
 //! move the plate by `frozen_driven_range_deg`, for `plate_persist_s`, is a stuck TPS (P0121); a
-//! TPS static (not frozen) while driven by `driven_range_deg`, as long, is a stuck plate (P2119). When a residual test fails, the monitor waits
+//! TPS static (not frozen) while driven by `driven_range_deg`, as long, is a stuck plate
+//! (P2119). When a residual test fails, the monitor waits
 //! `decision_window_s` for the other tests (and for the plate test while it is counting), then
 //! names the fault: frozen TPS -> TPS stuck; only the combined wattmeter test, confirmed
 //! `watt_confirm_alarms` times within `watt_confirm_s`, and the wattmeter-only test alarming
@@ -734,10 +735,9 @@ impl ThrottleMonitor {
 
     /// The TPS has not moved by `static_tps_range_deg` over the motion window while the
     /// applied voltage should have moved the plate: its static map spanned more than
-    /// `driven_range_deg`, or holds the plate that far from the TPS angle.
-    /// Whether the TPS stays put while the voltage's static map spans more than `driven_deg`
-    /// over the motion window, or sits more than that away from the TPS angle (off the end
-    /// stops by `driven_range_deg`).
+    /// `driven_deg` (deg), or holds the plate that far from the TPS angle (judged only
+    /// `driven_range_deg` or more off the end stops). The plate test asks for
+    /// `driven_range_deg`, a frozen TPS for `frozen_driven_range_deg`.
     fn static_while_driven(&self, driven_deg: f64) -> bool {
         // A TPS at a rail (an open or shorted line reads like a plate at its stop) is left to
         // the circuit checks. At a rail means for `rail_persist_s` in a row: a healthy TPS a
