@@ -175,7 +175,7 @@ pub struct IntakeMonitorConfig {
     /// `noise_max_throttle_rate_deg_s` (deg/s), or changes its rate by more than
     /// `noise_max_throttle_rate_change_deg_s` (deg/s) from the segment before, and the
     /// `noise_settle_segments` after it. A tip-in bends the readings' course within a few
-    /// segments, and their noise difference (a second difference over four segments) is not
+    /// segments, and their four-segment noise difference (`noise_difference`) is not
     /// noise then; a steady ramp (a pedal moved at an even pace) bends it little: at 20 deg/s
     /// the manifold pressure's second difference from the throttle's curvature is about a
     /// tenth of the MAP noise's, so only the start and end of a ramp, where its rate changes,
