@@ -7,15 +7,39 @@ use std::process::Command;
 /// Writes `scenario` as `<name>.toml` in a temporary directory, runs `fdd evaluate --json` on
 /// it and returns the parsed report.
 fn evaluate(name: &str, scenario: &str) -> serde_json::Value {
+    evaluate_with(name, scenario, "")
+}
+
+/// As [`evaluate`], with `monitor_keys` (TOML lines) as the throttle config's `[monitor]` table
+/// over the embedded defaults (none: the embedded configuration).
+fn evaluate_with(name: &str, scenario: &str, monitor_keys: &str) -> serde_json::Value {
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join(format!("{name}.toml"));
     std::fs::write(&path, scenario).expect("write scenario");
-    let out = Command::new(env!("CARGO_BIN_EXE_fdd"))
-        .current_dir(Path::new(env!("CARGO_MANIFEST_DIR")))
-        .args(["evaluate", "--json"])
-        .arg(&path)
-        .output()
-        .expect("run fdd");
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_fdd"));
+    cmd.current_dir(Path::new(env!("CARGO_MANIFEST_DIR")))
+        .args(["evaluate", "--json"]);
+    if !monitor_keys.is_empty() {
+        let throttle = dir.path().join("throttle.toml");
+        let text = fdd::config::DEFAULT_THROTTLE_TOML;
+        assert!(
+            !text.contains("\n[monitor]"),
+            "the default has no [monitor] table"
+        );
+        std::fs::write(&throttle, format!("{text}\n[monitor]\n{monitor_keys}\n"))
+            .expect("write throttle config");
+        let runtime = dir.path().join("fdd.toml");
+        let runtime_text = fdd::replay::config::DEFAULT_RUNTIME_TOML.replace(
+            "throttle = true",
+            &format!(
+                "throttle = true\nthrottle_config = {:?}",
+                throttle.display().to_string()
+            ),
+        );
+        std::fs::write(&runtime, runtime_text).expect("write runtime config");
+        cmd.arg("--config").arg(&runtime);
+    }
+    let out = cmd.arg(&path).output().expect("run fdd");
     assert!(
         out.status.success(),
         "{}",
@@ -594,10 +618,37 @@ fn a_tps_stuck_on_a_hold_is_named_without_waiting_for_a_large_move() {
     let log = &v["logs"][0];
     let stuck = first_dtc_s(log, "P0121");
     assert!(
-        stuck.is_some_and(|t| (428.0..429.5).contains(&t)),
-        "P0121 within 1.5 s of the onset at 428 s: {log}"
+        stuck.is_some_and(|t| (428.0..428.3).contains(&t)),
+        "P0121 within 0.3 s of the onset at 428 s: {log}"
     );
     assert_eq!(v["monitors"][0]["false_dtcs"], 0, "{v}");
+}
+
+// The same stuck TPS with `frozen_alone_samples = 0` waits for the static map to move 3 deg
+// away (428.49 s): 200 identical readings name it on their own, 0.2 s after the onset.
+#[test]
+fn a_tps_frozen_for_frozen_alone_samples_is_stuck_without_a_drive() {
+    let v = evaluate_with(
+        "throttle_stuck_on_holds",
+        THROTTLE_STUCK_ON_HOLDS,
+        "frozen_alone_samples = 0",
+    );
+    let log = &v["logs"][0];
+    let stuck = first_dtc_s(log, "P0121");
+    assert!(
+        stuck.is_some_and(|t| (428.3..429.5).contains(&t)),
+        "P0121 only once the plate left the reading: {log}"
+    );
+    let v = evaluate_with(
+        "throttle_stuck_on_holds",
+        THROTTLE_STUCK_ON_HOLDS,
+        "frozen_alone_samples = 200",
+    );
+    let stuck = first_dtc_s(&v["logs"][0], "P0121");
+    assert!(
+        stuck.is_some_and(|t| (428.15..428.25).contains(&t)),
+        "P0121 200 readings after the onset: {v}"
+    );
 }
 
 /// A scenario of the tuning set's healing block (`fixtures/sets/throttle_tuning/<file>`).

@@ -21,7 +21,10 @@
 //! the flag) and DTCs raised per hour.
 //!
 //! Samples the truth marks [`Truth::Ignored`] (a fault present but without effect on anything
-//! measured, or a settling margin) count nowhere; they end no episode.
+//! measured, or a settling margin) count nowhere; they end no episode. A DTC raised during them
+//! belongs to the episode they are part of: the open one, or else the one that opens next (at
+//! its onset, delay 0: a stuck sensor named before the plate left its reading), unless
+//! fault-free samples come first.
 //!
 //! This module is pure bookkeeping: no I/O, and allocation only per log and per episode.
 
@@ -145,11 +148,35 @@ struct Episode {
     group_missed: bool,
 }
 
+impl Episode {
+    /// Counts a DTC raised at `t_s` for this episode.
+    fn dtc(&mut self, t_s: f64, classes: &[usize], kind: DtcKind) {
+        self.first_dtc_s.get_or_insert(t_s);
+        let names_it = classes.contains(&self.class);
+        match (kind, names_it) {
+            (DtcKind::Specific, true) => {
+                self.first_correct_dtc_s.get_or_insert(t_s);
+            }
+            (DtcKind::Specific, false) => self.wrong_dtc = true,
+            (DtcKind::Group, true) => self.group_dtc = true,
+            (DtcKind::Group, false) => {
+                self.group_dtc = true;
+                self.group_missed = true;
+            }
+        }
+    }
+}
+
 /// The state within the log being fed.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 struct LogState {
     previous: Option<(f64, Truth, bool)>,
     open: Option<Episode>,
+    /// DTCs raised while a fault was present without an observable effect yet and no episode
+    /// was open: they count for the episode that opens next, at its onset (a sensor named
+    /// stuck before the plate moves away from its reading), and for nothing if fault-free
+    /// samples come first.
+    early: Vec<(Vec<usize>, DtcKind)>,
 }
 
 /// Accumulates samples and DTCs of any number of logs; see the module documentation.
@@ -210,6 +237,7 @@ impl Evaluator {
             self.episodes.push(e);
         }
         self.log.previous = None;
+        self.log.early.clear();
     }
 
     /// One sample at `t_s` (s, non-decreasing within a log): the truth, the system's flag and its
@@ -256,6 +284,7 @@ impl Evaluator {
         match truth {
             Truth::FaultFree => {
                 self.close_episode();
+                self.log.early.clear();
                 self.free += 1;
                 if flagged {
                     self.free_flagged += 1;
@@ -273,15 +302,22 @@ impl Evaluator {
                 if self.log.open.is_some_and(|e| e.class != class) {
                     self.close_episode();
                 }
-                let e = self.log.open.get_or_insert(Episode {
-                    class,
-                    onset_s: t_s,
-                    first_flag_s: None,
-                    first_dtc_s: None,
-                    first_correct_dtc_s: None,
-                    wrong_dtc: false,
-                    group_dtc: false,
-                    group_missed: false,
+                let early = &mut self.log.early;
+                let e = self.log.open.get_or_insert_with(|| {
+                    let mut e = Episode {
+                        class,
+                        onset_s: t_s,
+                        first_flag_s: None,
+                        first_dtc_s: None,
+                        first_correct_dtc_s: None,
+                        wrong_dtc: false,
+                        group_dtc: false,
+                        group_missed: false,
+                    };
+                    for (classes, kind) in early.drain(..) {
+                        e.dtc(t_s, &classes, kind);
+                    }
+                    e
                 });
                 self.faulty += 1;
                 if flagged {
@@ -321,21 +357,9 @@ impl Evaluator {
             // An episode goes on through samples without an observable effect (they end no
             // episode), so a DTC raised then still belongs to it.
             (Some(e), Some((_, Truth::Faulty(_) | Truth::Ignored, _))) => {
-                e.first_dtc_s.get_or_insert(t_s);
-                let names_it = classes.contains(&e.class);
-                match (kind, names_it) {
-                    (DtcKind::Specific, true) => {
-                        e.first_correct_dtc_s.get_or_insert(t_s);
-                    }
-                    (DtcKind::Specific, false) => e.wrong_dtc = true,
-                    (DtcKind::Group, true) => e.group_dtc = true,
-                    (DtcKind::Group, false) => {
-                        e.group_dtc = true;
-                        e.group_missed = true;
-                    }
-                }
+                e.dtc(t_s, classes, kind);
             }
-            (_, Some((_, Truth::Ignored, _))) => {}
+            (None, Some((_, Truth::Ignored, _))) => self.log.early.push((classes.to_vec(), kind)),
             _ => self.false_dtcs += 1,
         }
         Ok(())
@@ -529,6 +553,43 @@ mod tests {
         assert_eq!(watt.correct_dtc_rate, 0.0);
         assert_eq!(watt.median_detection_delay_s, 2.0);
         assert!(watt.median_dtc_delay_s.is_nan());
+    }
+
+    #[test]
+    fn a_dtc_before_the_fault_is_observable_counts_for_its_episode() {
+        let mut ev = Evaluator::new(&["tps_stuck", "plate"]);
+        // Log 1: fault-free 0..4; the fault present without effect at 5..6, where the correct
+        // DTC is raised (t = 5.5); observable from 7 to 9.
+        for k in 0..5 {
+            ev.sample(k as f64, Truth::FaultFree, false, &[0.0, 0.0])
+                .unwrap();
+        }
+        ev.sample(5.0, Truth::Ignored, true, &[1.0, 0.0]).unwrap();
+        ev.dtc(5.5, &[0], DtcKind::Specific).unwrap();
+        ev.sample(6.0, Truth::Ignored, true, &[1.0, 0.0]).unwrap();
+        for k in 7..10 {
+            ev.sample(k as f64, Truth::Faulty(0), true, &[1.0, 0.0])
+                .unwrap();
+        }
+        // Log 2: a DTC during a settling margin that fault-free samples follow counts nowhere,
+        // and does not carry over to the next episode.
+        ev.start_log();
+        ev.sample(0.0, Truth::Ignored, false, &[0.0, 0.0]).unwrap();
+        ev.dtc(0.5, &[1], DtcKind::Specific).unwrap();
+        ev.sample(1.0, Truth::FaultFree, false, &[0.0, 0.0])
+            .unwrap();
+        ev.sample(2.0, Truth::Faulty(1), false, &[0.0, 0.0])
+            .unwrap();
+        let r = ev.report();
+        assert_eq!(r.false_dtcs, 0);
+        let stuck = &r.classes[0];
+        assert_eq!(
+            (stuck.episodes, stuck.any_dtc, stuck.correct_dtc),
+            (1, 1, 1)
+        );
+        assert_eq!(stuck.median_dtc_delay_s, 0.0);
+        let plate = &r.classes[1];
+        assert_eq!((plate.episodes, plate.any_dtc), (1, 0));
     }
 
     #[test]

@@ -57,6 +57,14 @@ pub struct ThrottleMonitorConfig {
     /// Identical TPS readings in a row that make the signal frozen (a healthy sensor's noise
     /// toggles the ADC code).
     pub frozen_samples: u32,
+    /// Identical TPS readings in a row that make a stuck sensor on their own, without the
+    /// drive of `frozen_driven_range_deg` (0: never). A sensor whose electrical noise is at
+    /// least 0.3 ADC steps (std) repeats a code 200 times in a row with a probability below
+    /// 1e-15 (the chance of a repeat is at most 0.82 there), while a TPS stuck on a steady hold
+    /// would otherwise wait for the next change of the voltage. The simulated healthy TPS at
+    /// 2 mV (0.4 steps) and no plate motion repeated a code at most 37 times in 15 min. A
+    /// quieter sensor (a filtered or digital one) needs 0 here.
+    pub frozen_alone_samples: u32,
     /// TPS innovation gate: a TPS sample whose NIS in the TPS filter exceeds this is kept out of
     /// the combined filter.
     pub tps_gate_nis: f64,
@@ -206,6 +214,7 @@ impl Default for ThrottleMonitorConfig {
             intermittent_count: 3,
             intermittent_window_s: 2.0,
             frozen_samples: 40,
+            frozen_alone_samples: 200,
             tps_gate_nis: 400.0,
             tps_nis_window: 10,
             tps_nis_cap: 5000.0,

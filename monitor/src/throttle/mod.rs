@@ -28,7 +28,8 @@
 //! Decision: an open circuit / short is a rail reading the model calls implausible that lasts
 //! `rail_persist_s`; shorter episodes are dropouts, and `intermittent_count` of them within
 //! `intermittent_window_s` make an intermittent circuit. A TPS frozen while the voltage should
-//! move the plate by `frozen_driven_range_deg`, for `plate_persist_s`, is a stuck TPS (P0121); a
+//! move the plate by `frozen_driven_range_deg`, for `plate_persist_s`, or frozen for
+//! `frozen_alone_samples` readings, is a stuck TPS (P0121); a
 //! TPS static (not frozen) while driven by `driven_range_deg`, as long, is a stuck plate
 //! (P2119). When a residual test fails, the monitor waits
 //! `decision_window_s` for the other tests (and for the plate test while it is counting), then
@@ -407,6 +408,12 @@ impl ThrottleMonitor {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(setting(key, format!("{v} must be a non-negative number")));
             }
+        }
+        if cfg.frozen_alone_samples != 0 && cfg.frozen_alone_samples < cfg.frozen_samples {
+            return Err(setting(
+                "frozen_alone_samples",
+                "must be 0 (never) or at least frozen_samples",
+            ));
         }
         if cfg.watt_confirm_alarms == 0 {
             return Err(setting("watt_confirm_alarms", "must be at least 1"));
@@ -921,21 +928,31 @@ impl ThrottleMonitor {
         // the voltage should move the plate is a stuck sensor on its own, for as long as the
         // plate test would need: the TPS filter follows a frozen reading and its tests do not
         // fire while the plate moves.
-        let frozen_driven = self.tps_fault.is_none()
+        // Frozen for `frozen_alone_samples`, it is stuck at once, driven or not.
+        let frozen = self.tps_fault.is_none()
             && self.plate_fault.is_none()
-            && self.frozen_run >= self.cfg.frozen_samples
-            && self.static_while_driven(self.cfg.frozen_driven_range_deg);
+            && self.frozen_run >= self.cfg.frozen_samples;
+        let alone = frozen
+            && self.cfg.frozen_alone_samples > 0
+            && self.frozen_run >= self.cfg.frozen_alone_samples;
+        let frozen_driven =
+            frozen && (alone || self.static_while_driven(self.cfg.frozen_driven_range_deg));
         self.frozen_driven_run = if frozen_driven {
             self.frozen_driven_run + 1
         } else {
             0
         };
-        if self.frozen_driven_run >= self.plate_persist {
+        if alone || self.frozen_driven_run >= self.plate_persist {
             self.frozen_driven_run = 0;
+            let limit = if alone {
+                self.cfg.frozen_alone_samples
+            } else {
+                self.cfg.frozen_samples
+            };
             let r = TestResult {
                 value: f64::from(self.frozen_run),
                 min: 0.0,
-                max: f64::from(self.cfg.frozen_samples.saturating_sub(1)),
+                max: f64::from(limit.saturating_sub(1)),
                 verdict: Verdict::Failed,
             };
             self.set_failed(ThrottleFault::TpsStuck, r, now_s);
