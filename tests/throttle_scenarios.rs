@@ -160,10 +160,13 @@ fn full_speed_swings_between_the_stops_raise_no_wattmeter_dtc() {
 // follows the TPS, never rules the stop out when the plate leaves it. Held-out version 5, log
 // 12 (whose scenario this is, cut at 470 s): never detected. The rail check now also asks the
 // wattmeter-only filter, which does not see the TPS, once it has ruled the stop out for
-// `watt_rail_persist_s` (1 s): P0123 at 456.8 s, 3.8 s after the onset.
+// `watt_rail_persist_s` (1 s): P0123 at 456.8 s, 3.8 s after the onset. Since that filter
+// allows the static map its error (`static_map_error_frac`: a quiet healthy plate on the open
+// stop was named shorted), it rules the stop out only once the map has come down further: P0123
+// at 473.1 s, 20.1 s after the onset.
 const THROTTLE_STUCK_AT_THE_STOP: &str = r#"name = "throttle_stuck_at_the_stop"
 monitor = "throttle"
-duration_s = 470.0
+duration_s = 490.0
 seed = 13012
 
 [excitation]
@@ -195,8 +198,8 @@ fn a_tps_stuck_at_the_stop_reading_is_named_when_the_plate_leaves_the_stop() {
     let log = &v["logs"][0];
     let first_tps = first_dtc_s(log, "P012");
     assert!(
-        first_tps.is_some_and(|t| (453.0..463.0).contains(&t)),
-        "a TPS DTC within 10 s of the onset at 453 s: {log}"
+        first_tps.is_some_and(|t| (453.0..478.0).contains(&t)),
+        "a TPS DTC within 25 s of the onset at 453 s: {log}"
     );
     assert_eq!(v["monitors"][0]["false_dtcs"], 0, "{v}");
 }
@@ -529,10 +532,11 @@ fn a_plate_stuck_on_a_hold_just_past_the_driven_range_is_named() {
     let v = evaluate("throttle_plate_stuck_holds", THROTTLE_PLATE_STUCK_HOLDS);
     let log = &v["logs"][0];
     let plate = first_dtc_s(log, "P2119");
-    // The hold that puts the static map 8 deg from the stuck angle starts at 317.5 s.
+    // The hold that puts the static map 8 deg from the stuck angle starts at 317.5 s; the map
+    // has moved 8 deg since the TPS stood still already at 301.8 s.
     assert!(
-        plate.is_some_and(|t| (317.5..319.0).contains(&t)),
-        "P2119 within 1.5 s of the hold at 317.5 s: {log}"
+        plate.is_some_and(|t| (300.0..319.0).contains(&t)),
+        "P2119 by 1.5 s into the hold at 317.5 s: {log}"
     );
     assert_eq!(v["monitors"][0]["false_dtcs"], 0, "{v}");
 }
@@ -711,4 +715,84 @@ fn a_short_that_ends_heals_within_the_grace() {
 #[test]
 fn a_wattmeter_fault_that_ends_heals_within_the_grace() {
     heals_within_the_grace("throttle_tuning_58_wattmeter_heals", "P1651");
+}
+
+// A quiet plate (process noise x0.1; the sets' x0.5-2 make the plate wander 10-20 deg about a
+// hold) of a plant 1.5 % off Table I on a chirp: at 1.05 V it rests at 67.8 deg where the
+// model's static map says 76.3, and the TPS stands still. The plate test took the map sitting
+// 8 deg from the TPS for a stuck plate (P2119 at 40.85 s); it now asks the map to move.
+const THROTTLE_QUIET_CHIRP: &str = r#"name = "throttle_quiet_chirp"
+monitor = "throttle"
+duration_s = 60.0
+seed = 1040
+
+[excitation]
+kind = "chirp"
+
+[sensors]
+wattmeter_noise_std_w = 0.1
+tps_noise_std_v = 0.003
+tps_gain = 1.001548
+tps_offset_v = 0.015615
+wattmeter_gain = 1.010756
+wattmeter_lag_s = 0.003
+
+[plant]
+table1_rel_error = 0.015
+table1_max_draws = 500
+stop_restitution = 0.3
+process_noise_scale = 0.1
+
+[fault]
+kind = "none"
+"#;
+
+#[test]
+fn a_quiet_healthy_plate_away_from_the_static_map_is_not_named_stuck() {
+    let v = evaluate("throttle_quiet_chirp", THROTTLE_QUIET_CHIRP);
+    let log = &v["logs"][0];
+    assert_eq!(log["dtcs"].as_array().map(Vec::len), Some(0), "{log}");
+}
+
+// A quiet plate resting on the open stop at 1.05 V (the model's map: 76.5 deg) behind a TPS
+// 1.2 % high that clips at 5 V: the wattmeter-only filter, which at rest knows the angle only
+// through the map, ruled the 5 V reading out and named a short at 39.13 s. It now allows the
+// map its error (`static_map_error_frac`); without that allowance the short comes back.
+const THROTTLE_QUIET_OPEN_STOP: &str = r#"name = "throttle_quiet_open_stop"
+monitor = "throttle"
+duration_s = 45.0
+seed = 1049
+
+[excitation]
+kind = "pedal_ramps"
+
+[sensors]
+wattmeter_noise_std_w = 0.444
+tps_noise_std_v = 0.005
+tps_gain = 1.011751
+tps_offset_v = -0.009732
+wattmeter_gain = 0.955132
+
+[plant]
+table1_rel_error = 0.015
+table1_max_draws = 500
+stop_restitution = 0.1
+process_noise_scale = 0.1
+
+[fault]
+kind = "none"
+"#;
+
+#[test]
+fn a_quiet_plate_on_the_open_stop_with_a_clipped_tps_is_not_a_short() {
+    let v = evaluate("throttle_quiet_open_stop", THROTTLE_QUIET_OPEN_STOP);
+    let log = &v["logs"][0];
+    assert_eq!(first_dtc_s(log, "P0123"), None, "{log}");
+    let v = evaluate_with(
+        "throttle_quiet_open_stop",
+        THROTTLE_QUIET_OPEN_STOP,
+        "static_map_error_frac = 0.0",
+    );
+    let log = &v["logs"][0];
+    assert!(first_dtc_s(log, "P0123").is_some(), "{log}");
 }

@@ -7,11 +7,12 @@ everything a new vehicle would change (fixtures/sets/README.md says how):
 
 - tuning: seeds 1000+, excitation pulse_train / chirp / pedal_ramps, wattmeter noise 0.05 to
   0.4 W, TPS noise 4-10 mV, TPS gain/offset within 1.5 % / 15 mV, wattmeter gain within 4 %,
-  lags, Table I error up to 1 %, restitution 0.2, fault sizes as the committed fixtures';
-- held-out: seeds 27000+ (version 12), excitation steady_holds / idle_blips / mixed, wattmeter noise 0.05 to
+  lags, Table I error up to 1 %, restitution 0.2, fault sizes as the committed fixtures',
+  process noise x0.5 to x2 and a block of quiet plates (x0.05 to x0.3);
+- held-out: seeds 29000+ (version 13), excitation steady_holds / idle_blips / mixed, wattmeter noise 0.05 to
   0.5 W, Table I error up to 1.5 %, stops and restitution, TPS and wattmeter gain and offset
-  errors and lags, fault sizes 0.75 to 1.5 times the fixtures', long fault-free driving
-  (>= 10 h in all).
+  errors and lags, process noise x0.08 to x2, fault sizes 0.75 to 1.5 times the fixtures',
+  long fault-free driving (>= 10 h in all).
 
 Nothing in the monitors may be chosen by looking at results on the held-out set.
 
@@ -275,11 +276,50 @@ def tuning():
         items.append((name, scenario(name, 1000 + n, 240, exc, sensors, plant, f,
                                      comment="tuning: %s from 120 s to 160 s, size x%.2f" % (kind, scale))))
         n += 1
+    # Quiet plates (process noise x0.05 to x0.3): the truth's process noise stands for the
+    # paper's model-vs-data error and makes the plate wander 10-20 deg about a hold at x1-x2,
+    # which no real plate does. On quiet plates the static map's own error shows (a plant
+    # 1.5 % off Table I rests up to 14 deg from the model's map): added after a stuck plate and
+    # a TPS short were named on such healthy plates (their own generator).
+    quiet = random.Random(17)
+    for i in range(6 + len(KINDS)):
+        exc = {"kind": styles[i % len(styles)]}
+        sensors = {
+            "wattmeter_noise_std_w": quiet.choice([0.05, 0.1, 0.2, 0.3, 0.4, 0.5]),
+            "tps_noise_std_v": quiet.choice([0.003, 0.005, 0.008, 0.01]),
+            "tps_gain": round(1.0 + quiet.uniform(-0.02, 0.02), 6),
+            "tps_offset_v": round(quiet.uniform(-0.02, 0.02), 6),
+            "wattmeter_gain": round(1.0 + quiet.uniform(-0.04, 0.04), 6),
+        }
+        if quiet.random() < 0.5:
+            sensors["tps_lag_s"] = quiet.choice([0.001, 0.002])
+        if quiet.random() < 0.5:
+            sensors["wattmeter_lag_s"] = quiet.choice([0.001, 0.003])
+        plant = {
+            "table1_rel_error": quiet.choice([0.005, 0.01, 0.015]),
+            "table1_max_draws": 500,
+            "stop_restitution": quiet.choice([0.0, 0.1, 0.3]),
+            "process_noise_scale": quiet.choice([0.05, 0.1, 0.2, 0.3]),
+        }
+        if i < 6:
+            name = "throttle_tuning_%02d_nominal_quiet" % n
+            items.append((name, scenario(name, 1000 + n, 1200, exc, sensors, plant,
+                                         {"kind": "none"},
+                                         comment="tuning: fault-free drive, 20 min, quiet plate")))
+        else:
+            kind = KINDS[i - 6]
+            scale = quiet.uniform(0.75, 1.5)
+            f = fault_table(quiet, kind, 120.0, scale)
+            name = "throttle_tuning_%02d_%s_quiet" % (n, kind)
+            items.append((name, scenario(name, 1000 + n, 180, exc, sensors, plant, f,
+                                         comment="tuning: %s from 120 s, size x%.2f, quiet plate"
+                                         % (kind, scale))))
+        n += 1
     return items
 
 
 def heldout():
-    # Version 12 (seeds 27000+, random.Random(28)). Version 1 (seeds 5000+) was evaluated once,
+    # Version 13 (seeds 29000+, random.Random(30)). Version 1 (seeds 5000+) was evaluated once,
     # with a tuning set that lacked sensor tolerances, lags and stop restitution; version 2
     # (seeds 7000+, random.Random(6)) once after the step test and the allowances; version 3
     # (seeds 9000+, random.Random(8)) once before the frozen-TPS test and the wattmeter-only
@@ -297,9 +337,11 @@ def heldout():
     # rules it led to; version 10 (seeds 23000+, random.Random(24)) once before a frozen TPS
     # got its own, smaller drive (frozen_driven_range_deg); version 11 (seeds 25000+,
     # random.Random(26)) once before a TPS frozen for frozen_alone_samples was stuck without
-    # a drive. All eleven are retired (README).
-    rng = random.Random(28)
-    base = 27000
+    # a drive; version 12 (seeds 27000+, random.Random(28)) once before the quiet plates (the
+    # plate test's map "since the TPS last moved", the rail check's map allowance), whose
+    # process noise it did not draw. All twelve are retired (README).
+    rng = random.Random(30)
+    base = 29000
     styles = ["steady_holds", "idle_blips", "mixed"]
     items = []
     n = 0
@@ -321,7 +363,7 @@ def heldout():
             "table1_rel_error": rng.choice([0.0, 0.005, 0.01, 0.015]),
             "table1_max_draws": 500,
             "stop_restitution": rng.choice([0.0, 0.1, 0.3]),
-            "process_noise_scale": rng.choice([0.5, 1.0, 2.0]),
+            "process_noise_scale": rng.choice([0.08, 0.15, 0.25, 0.5, 1.0, 2.0]),
         }
         return exc, sensors, plant
 

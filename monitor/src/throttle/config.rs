@@ -42,6 +42,15 @@ pub struct ThrottleMonitorConfig {
     pub rail_low_v: f64,
     pub rail_high_v: f64,
     pub rail_margin_deg: f64,
+    /// Relative error of the static map (the plate's rest angle for a voltage): a plant within
+    /// the documented 1.5 % of Table I rests up to 14 % of the map's angle from it (1st and
+    /// 99th percentiles of 300 such plants: -11.5 and +13.5 deg at 76.5 deg). The
+    /// wattmeter-only filter knows the angle at rest only through that map (the motor current
+    /// at rest is the voltage over the winding, whatever the angle), so it rules a rail
+    /// reading out only beyond this share of its angle, on top of `rail_margin_deg`: a quiet
+    /// healthy plate resting on the open stop at 1.05 V, where the map says 76.5 deg, with a
+    /// TPS 1.2 % high clipped at 5 V, was named shorted.
+    pub static_map_error_frac: f64,
     /// Implausible rail readings lasting this long are an open circuit / short (s).
     pub rail_persist_s: f64,
     /// A rail reading that the wattmeter-only filter rules out for this long (s) counts as
@@ -148,12 +157,22 @@ pub struct ThrottleMonitorConfig {
     pub decision_window_s: f64,
     /// Plate-stuck test: over `motion_window_s`, the TPS spans less than
     /// `static_tps_range_deg` while the static map of the applied voltage spans more than
-    /// `driven_range_deg`, or sits more than that away from the TPS angle. 8 deg (15 until
-    /// the wattmeter-only filter landed): on the tuning set 3 deg raised no false DTC either,
-    /// and 8 halves the stuck-plate delay against 15.
+    /// `driven_range_deg`, over the window or since the TPS last moved (by the map's changes
+    /// above `static_map_from_deg` only). 8 deg (15 until the wattmeter-only filter landed):
+    /// on the tuning set 3 deg raised no false DTC either, and 8 halves the stuck-plate delay
+    /// against 15. The map sitting that far from the TPS angle no longer counts for the plate
+    /// (it does for a frozen TPS): the map's absolute error is larger than that (see
+    /// `static_map_error_frac`), and quiet healthy plates were named stuck by it.
     pub motion_window_s: f64,
     pub static_tps_range_deg: f64,
     pub driven_range_deg: f64,
+    /// Below this angle the static map's changes do not count for a plate standing still
+    /// across holds (deg): at low voltages the plate's breakaway from the spring preload
+    /// differs from plant to plant by up to 12 deg (0.25-0.45 V, maps up to 25 deg), so a map
+    /// moving 8 deg there says little. Above it the map moves with the plant's within about
+    /// 15 %, up to the open stop over `1 + static_map_error_frac` (75 deg), where such a
+    /// plant may already rest on the stop.
+    pub static_map_from_deg: f64,
     /// The same drive for a frozen TPS (identical readings, which a healthy sensor's noise
     /// never gives): 3 deg, less than the plate test's, since the frozen reading is itself the
     /// evidence and the drive only says the plate has left it (a stuck TPS is observable from
@@ -209,6 +228,7 @@ impl Default for ThrottleMonitorConfig {
             rail_low_v: 0.03,
             rail_high_v: 4.97,
             rail_margin_deg: 2.0,
+            static_map_error_frac: 0.2,
             rail_persist_s: 0.02,
             watt_rail_persist_s: 1.0,
             intermittent_count: 3,
@@ -243,6 +263,7 @@ impl Default for ThrottleMonitorConfig {
             motion_window_s: 0.2,
             static_tps_range_deg: 1.0,
             driven_range_deg: 8.0,
+            static_map_from_deg: 30.0,
             frozen_driven_range_deg: 3.0,
             plate_persist_s: 0.3,
             heal_s: 5.0,

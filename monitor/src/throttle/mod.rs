@@ -55,6 +55,7 @@
 pub mod config;
 mod span_window;
 pub mod step_test;
+mod still_run;
 
 use fdd_diagnostics::detectors::{two_sided_arl, Cusum, CusumConfig};
 use fdd_diagnostics::{TestResult, Verdict};
@@ -68,6 +69,7 @@ use nalgebra::{Matrix1, Matrix2, Matrix3, Vector1, Vector2, Vector3};
 pub use config::ThrottleMonitorConfig;
 use span_window::SpanWindow;
 use step_test::{StepTest, StepTestConfig};
+use still_run::StillRun;
 
 use crate::monitor::{Monitor, Output, OutputSink};
 use crate::monitor_events::{EventSpec, FreezeValues, MonitorEvents};
@@ -79,6 +81,9 @@ use crate::signal_table::{SignalId, SignalTable};
 const DRIFT_SIGMA_FLOOR_DEG: f64 = 3.0;
 /// Capacity of the fixed rings (NIS window, motion window, dropout times).
 const RING: usize = 512;
+/// Time constant of the low-pass through which the TPS's standing still across holds is
+/// judged (s): 20 readings average 10 mV of noise down to 0.04 deg.
+const STILL_TPS_TAU_S: f64 = 0.02;
 /// Steps between updates of the filters' `R` from the noise estimates.
 const NOISE_UPDATE_STEPS: u32 = 64;
 
@@ -271,6 +276,8 @@ pub struct ThrottleMonitor {
     cusum_watt_only: Cusum,
     tps_hist: SpanWindow,
     eq_hist: SpanWindow,
+    /// The TPS standing still across holds, and the static map's range meanwhile.
+    still: StillRun,
     rail_persist: u32,
     /// Samples in a row whose rail reading the wattmeter-only filter rules out, and how many
     /// make that a rail fault (`watt_rail_persist_s`).
@@ -404,6 +411,8 @@ impl ThrottleMonitor {
             ("tps_step_motion_scale", cfg.tps_step_motion_scale),
             ("tps_step_mode_margin_deg", cfg.tps_step_mode_margin_deg),
             ("tps_step_rho_floor", cfg.tps_step_rho_floor),
+            ("static_map_error_frac", cfg.static_map_error_frac),
+            ("static_map_from_deg", cfg.static_map_from_deg),
         ] {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(setting(key, format!("{v} must be a non-negative number")));
@@ -573,6 +582,12 @@ impl ThrottleMonitor {
             )?,
             tps_hist: SpanWindow::new(motion),
             eq_hist: SpanWindow::new(motion),
+            still: StillRun::new(
+                cfg.static_tps_range_deg,
+                STILL_TPS_TAU_S,
+                cfg.period_s,
+                motion as u64,
+            ),
             rail_persist: ((cfg.rail_persist_s / cfg.period_s).round() as u32).max(1),
             watt_rail_run: 0,
             disagree_run: 0,
@@ -742,10 +757,13 @@ impl ThrottleMonitor {
 
     /// The TPS has not moved by `static_tps_range_deg` over the motion window while the
     /// applied voltage should have moved the plate: its static map spanned more than
-    /// `driven_deg` (deg), or holds the plate that far from the TPS angle (judged only
-    /// `driven_range_deg` or more off the end stops). The plate test asks for
-    /// `driven_range_deg`, a frozen TPS for `frozen_driven_range_deg`.
-    fn static_while_driven(&self, driven_deg: f64) -> bool {
+    /// `driven_deg` (deg) over the window, or since the TPS last moved (the map's changes
+    /// above `static_map_from_deg`, see [`StillRun`]). The plate test asks for
+    /// `driven_range_deg`. A frozen TPS asks for `frozen_driven_range_deg`, and also counts a
+    /// map that holds the plate that far from the frozen reading (judged only
+    /// `driven_range_deg` or more off the end stops): the frozen reading is the evidence, while
+    /// a healthy plate rests up to 14 % of its angle from the model's map.
+    fn static_while_driven(&self, driven_deg: f64, frozen: bool) -> bool {
         // A TPS at a rail (an open or shorted line reads like a plate at its stop) is left to
         // the circuit checks. At a rail means for `rail_persist_s` in a row: a healthy TPS a
         // little offset at a stop dips into the rail band now and then by its noise, and a
@@ -758,18 +776,20 @@ impl ThrottleMonitor {
         // Away from the static map only off the end stops: a plate resting on a stop where the
         // voltage pushes it is where the static map is least certain (near the open stop it is
         // flat in the voltage, and a plant 1.5 % off Table I rests on the stop while the model's
-        // map puts it 12 deg short: retired held-out version 7, log 0). A plate stuck at a stop
-        // is still named when the voltage moves its map by `driven_range_deg`.
+        // map puts it 12 deg short: retired held-out version 7, log 0).
         let [lo, hi] = self.model.params().angle_limits_deg;
         let margin = self.cfg.driven_range_deg;
-        let away = match (self.eq_hist.last(), self.tps_hist.last()) {
-            (Some(eq), Some(tps)) => {
-                (eq - tps).abs() > driven_deg && tps > lo + margin && tps < hi - margin
-            }
-            _ => false,
-        };
-        let driven = (self.eq_hist.full() && self.eq_hist.span() > driven_deg) || away;
-        static_tps && driven
+        let away = frozen
+            && match (self.eq_hist.last(), self.tps_hist.last()) {
+                (Some(eq), Some(tps)) => {
+                    (eq - tps).abs() > driven_deg && tps > lo + margin && tps < hi - margin
+                }
+                _ => false,
+            };
+        let window = self.eq_hist.full() && self.eq_hist.span() > driven_deg;
+        let since = self.still.steps() >= self.tps_hist.capacity() as u64
+            && self.still.map_span_deg() > driven_deg;
+        static_tps && (window || since || away)
     }
 
     /// The wattmeter-only filter's plate angle and its standard deviation (deg).
@@ -936,7 +956,7 @@ impl ThrottleMonitor {
             && self.cfg.frozen_alone_samples > 0
             && self.frozen_run >= self.cfg.frozen_alone_samples;
         let frozen_driven =
-            frozen && (alone || self.static_while_driven(self.cfg.frozen_driven_range_deg));
+            frozen && (alone || self.static_while_driven(self.cfg.frozen_driven_range_deg, true));
         self.frozen_driven_run = if frozen_driven {
             self.frozen_driven_run + 1
         } else {
@@ -965,7 +985,7 @@ impl ThrottleMonitor {
         // the TPS noise, and a counter reset at every miss never got there (a plate stuck for
         // 40 s on steady holds went undetected).
         let trusted = self.tps_fault.is_none() && self.plate_fault.is_none();
-        let static_now = trusted && self.static_while_driven(self.cfg.driven_range_deg);
+        let static_now = trusted && self.static_while_driven(self.cfg.driven_range_deg, false);
         self.static_run = if static_now {
             self.static_run + 1
         } else if trusted {
@@ -1290,8 +1310,11 @@ impl Monitor for ThrottleMonitor {
             };
             (rail_low, rail_high) = ruled_out(theta_p, sigma_p);
             if self.watt_fault.is_none() {
+                // That filter knows the angle at rest only through the static map: the map's
+                // own error widens its spread.
                 let (theta_w, sigma_w) = self.watt_only_angle();
-                let (low, high) = ruled_out(theta_w, sigma_w);
+                let map_error = self.cfg.static_map_error_frac * theta_w.abs();
+                let (low, high) = ruled_out(theta_w, sigma_w + map_error / 3.0);
                 self.watt_rail_run = if low || high {
                     self.watt_rail_run.saturating_add(1)
                 } else {
@@ -1327,6 +1350,18 @@ impl Monitor for ThrottleMonitor {
             };
             self.last_tps = v;
             self.tps_hist.push(v / self.volts_per_deg);
+            if inside {
+                // The map only where it moves with the plant's: above the breakaway region and
+                // below where a plant `static_map_error_frac` off already rests on the open
+                // stop.
+                let top = self.model.params().angle_limits_deg[1]
+                    / (1.0 + self.cfg.static_map_error_frac);
+                let eq = self.eq_hist.last().unwrap_or(f64::NAN);
+                let eq = eq.max(self.cfg.static_map_from_deg).min(top);
+                self.still.push(v / self.volts_per_deg, eq);
+            } else {
+                self.still.clear();
+            }
             // The drift rule's disagreement, where the wattmeter-only filter is weakest: not
             // on the open stop with that filter below it (the static map is flat there; a
             // plant 1.5 % off Table I rests on the stop while the filter puts the plate 16 deg

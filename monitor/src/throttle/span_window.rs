@@ -94,6 +94,11 @@ impl SpanWindow {
         self.min_q.push_back((i, v));
     }
 
+    /// The window's length (values).
+    pub fn capacity(&self) -> usize {
+        self.cap
+    }
+
     /// The window holds `cap` values.
     pub fn full(&self) -> bool {
         self.pushed >= self.cap as u64
