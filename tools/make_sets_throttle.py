@@ -132,6 +132,30 @@ def write_set(dirname, items):
             f.write(text)
 
 
+def wide_draw(r, table1_errors, process_noise):
+    """Sensors and plant over the whole documented range, drawn from `r` in a fixed order (the
+    healing and quiet-plate blocks of the tuning set): Table I error and process noise scale
+    from the lists given."""
+    sensors = {
+        "wattmeter_noise_std_w": r.choice([0.05, 0.1, 0.2, 0.3, 0.4, 0.5]),
+        "tps_noise_std_v": r.choice([0.003, 0.005, 0.008, 0.01]),
+        "tps_gain": round(1.0 + r.uniform(-0.02, 0.02), 6),
+        "tps_offset_v": round(r.uniform(-0.02, 0.02), 6),
+        "wattmeter_gain": round(1.0 + r.uniform(-0.04, 0.04), 6),
+    }
+    if r.random() < 0.5:
+        sensors["tps_lag_s"] = r.choice([0.001, 0.002])
+    if r.random() < 0.5:
+        sensors["wattmeter_lag_s"] = r.choice([0.001, 0.003])
+    plant = {
+        "table1_rel_error": r.choice(table1_errors),
+        "table1_max_draws": 500,
+        "stop_restitution": r.choice([0.0, 0.1, 0.3]),
+        "process_noise_scale": r.choice(process_noise),
+    }
+    return sensors, plant
+
+
 def tuning():
     rng = random.Random(1)
     styles = ["pulse_train", "chirp", "pedal_ramps"]
@@ -253,23 +277,7 @@ def tuning():
     heal = random.Random(15)
     for i, kind in enumerate(KINDS):
         exc = {"kind": styles[i % len(styles)]}
-        sensors = {
-            "wattmeter_noise_std_w": heal.choice([0.05, 0.1, 0.2, 0.3, 0.4, 0.5]),
-            "tps_noise_std_v": heal.choice([0.003, 0.005, 0.008, 0.01]),
-            "tps_gain": round(1.0 + heal.uniform(-0.02, 0.02), 6),
-            "tps_offset_v": round(heal.uniform(-0.02, 0.02), 6),
-            "wattmeter_gain": round(1.0 + heal.uniform(-0.04, 0.04), 6),
-        }
-        if heal.random() < 0.5:
-            sensors["tps_lag_s"] = heal.choice([0.001, 0.002])
-        if heal.random() < 0.5:
-            sensors["wattmeter_lag_s"] = heal.choice([0.001, 0.003])
-        plant = {
-            "table1_rel_error": heal.choice([0.0, 0.005, 0.01, 0.015]),
-            "table1_max_draws": 500,
-            "stop_restitution": heal.choice([0.0, 0.1, 0.3]),
-            "process_noise_scale": heal.choice([0.5, 1.0, 2.0]),
-        }
+        sensors, plant = wide_draw(heal, [0.0, 0.005, 0.01, 0.015], [0.5, 1.0, 2.0])
         scale = heal.uniform(0.75, 1.5)
         f = fault_table(heal, kind, 120.0, scale, end_s=160.0)
         name = "throttle_tuning_%02d_%s_heals" % (n, kind)
@@ -284,23 +292,7 @@ def tuning():
     quiet = random.Random(17)
     for i in range(6 + len(KINDS)):
         exc = {"kind": styles[i % len(styles)]}
-        sensors = {
-            "wattmeter_noise_std_w": quiet.choice([0.05, 0.1, 0.2, 0.3, 0.4, 0.5]),
-            "tps_noise_std_v": quiet.choice([0.003, 0.005, 0.008, 0.01]),
-            "tps_gain": round(1.0 + quiet.uniform(-0.02, 0.02), 6),
-            "tps_offset_v": round(quiet.uniform(-0.02, 0.02), 6),
-            "wattmeter_gain": round(1.0 + quiet.uniform(-0.04, 0.04), 6),
-        }
-        if quiet.random() < 0.5:
-            sensors["tps_lag_s"] = quiet.choice([0.001, 0.002])
-        if quiet.random() < 0.5:
-            sensors["wattmeter_lag_s"] = quiet.choice([0.001, 0.003])
-        plant = {
-            "table1_rel_error": quiet.choice([0.005, 0.01, 0.015]),
-            "table1_max_draws": 500,
-            "stop_restitution": quiet.choice([0.0, 0.1, 0.3]),
-            "process_noise_scale": quiet.choice([0.05, 0.1, 0.2, 0.3]),
-        }
+        sensors, plant = wide_draw(quiet, [0.005, 0.01, 0.015], [0.05, 0.1, 0.2, 0.3])
         if i < 6:
             name = "throttle_tuning_%02d_nominal_quiet" % n
             items.append((name, scenario(name, 1000 + n, 1200, exc, sensors, plant,
