@@ -192,6 +192,30 @@ impl ThrottleModel {
             / self.params.angle_scale
     }
 
+    /// How far (A^2, the wattmeter's unit) the squared current could be off if the plate at
+    /// `theta_deg` were in another mode whose band lies within `margin_deg`: the largest
+    /// difference of the modes' static `(b u / (1 - a33))^2` under the voltage `u` (V). The
+    /// identified modes give the motor different stall gains (1.32, 0.71 and 0.46 A/V in
+    /// Table I), and a plate held at a mode boundary (the velocity state's scale and sign change
+    /// there, so a plate pushed into the 8 deg boundary chatters on it) draws the current of
+    /// whichever mode the plant is in while an estimate a fraction of a degree away relaxes
+    /// towards another's. Zero away from the boundaries.
+    pub fn mode_switch_current_spread(&self, theta_deg: f64, u: f64, margin_deg: f64) -> f64 {
+        let lo = mode_index(&self.params, theta_deg - margin_deg);
+        let hi = mode_index(&self.params, theta_deg + margin_deg);
+        let sq = |t: usize| {
+            let m = &self.params.modes[t];
+            (m.b * u / (1.0 - m.a33)).powi(2)
+        };
+        let (mut min, mut max) = (f64::INFINITY, f64::NEG_INFINITY);
+        for t in lo..=hi {
+            let v = sq(t);
+            min = min.min(v);
+            max = max.max(v);
+        }
+        (max - min).max(0.0)
+    }
+
     /// Steady state of mode `s` under constant voltage `u` (ignoring the stops and with
     /// `sgn(rho) = 0`), returned as the angle in degrees. Used to check how the modes join.
     pub fn static_angle_deg(&self, s: usize, u: f64, above_switch: bool) -> f64 {
@@ -450,6 +474,31 @@ mod tests {
         // Near 8 deg the modes differ little in a12.
         let low = model.mode_switch_spread_deg(8.5, 10.0, 1.5);
         assert!(low > 0.0 && low < 1.0, "{low}");
+    }
+
+    #[test]
+    fn a_current_spread_appears_only_near_a_boundary_and_grows_with_the_voltage() {
+        let model = ThrottleModel::new(table1()).expect("valid");
+        let m = &model.params().modes;
+        let stall = |t: usize, u: f64| (m[t].b * u / (1.0 - m[t].a33)).powi(2);
+        // Just below 8 deg at 1 V: modes 1 and 2, whose stall gains are 1.32 and 0.71 A/V.
+        let near = model.mode_switch_current_spread(7.9, 1.0, 1.5);
+        let expect = stall(0, 1.0) - stall(1, 1.0);
+        assert!((near - expect).abs() < 1e-12, "{near} vs {expect}");
+        assert!(near > 1.0, "{near} A^2 at 1 V");
+        // Quadratic in the voltage, and zero at 0 V.
+        let half = model.mode_switch_current_spread(7.9, 0.5, 1.5);
+        assert!((half - 0.25 * near).abs() < 1e-12, "{half}");
+        assert_eq!(model.mode_switch_current_spread(7.9, 0.0, 1.5), 0.0);
+        // Within one mode's band, nothing.
+        assert_eq!(model.mode_switch_current_spread(40.0, 1.0, 1.5), 0.0);
+        assert_eq!(model.mode_switch_current_spread(4.0, 1.0, 1.5), 0.0);
+        // Near 16 deg, modes 2 and 3.
+        let upper = model.mode_switch_current_spread(16.5, 1.0, 1.5);
+        assert!(
+            (upper - (stall(1, 1.0) - stall(2, 1.0))).abs() < 1e-12,
+            "{upper}"
+        );
     }
 
     #[test]

@@ -1598,7 +1598,17 @@ impl Monitor for ThrottleMonitor {
         // Residuals within the model-error allowance are no evidence of a wattmeter fault (a dead
         // band in innovation units: wide when the wattmeter is quiet, narrow when it is noisy).
         let (model_error, gain) = (self.cfg.watt_model_error_w, self.cfg.watt_gain_tolerance);
-        let z_w = dead_band(z_w, sigma_w, model_error + gain * predicted_w.abs());
+        // Near a mode boundary the predicted current could be another mode's.
+        let switch_w = self.model.mode_switch_current_spread(
+            self.model.angle_deg(self.both_ukf.state()),
+            uu[0],
+            self.cfg.tps_step_mode_margin_deg,
+        );
+        let z_w = dead_band(
+            z_w,
+            sigma_w,
+            model_error + gain * predicted_w.abs() + switch_w,
+        );
         let cusum_watt = self
             .cusum_watt
             .step(z_w.clamp(-clip, clip), z_w.is_finite());
