@@ -10,6 +10,17 @@ fn evaluate(name: &str, scenario: &str) -> serde_json::Value {
     evaluate_with(name, scenario, "")
 }
 
+/// The position output after the switch to the wattmeter estimate: the issue's 7 deg std.
+fn assert_position_within_7_deg_after_the_switch(log: &serde_json::Value) {
+    let switched = &log["after_switch"][0];
+    assert_eq!(switched["estimate"], "throttle_angle", "{log}");
+    let std = switched["std"].as_f64().expect("std");
+    assert!(
+        std <= 7.0,
+        "position error std after the switch {std:.2} deg"
+    );
+}
+
 /// As [`evaluate`], with `monitor_keys` (TOML lines) as the throttle config's `[monitor]` table
 /// over the embedded defaults (none: the embedded configuration).
 fn evaluate_with(name: &str, scenario: &str, monitor_keys: &str) -> serde_json::Value {
@@ -101,13 +112,7 @@ fn a_short_that_heals_at_the_stop_fails_again_when_the_plate_leaves_it() {
             .all(|d| d.starts_with("P0123-17") || d.starts_with("P2106-00")),
         "only the short and the switch: {dtcs:?}"
     );
-    let switched = &log["after_switch"][0];
-    assert_eq!(switched["estimate"], "throttle_angle", "{log}");
-    let std = switched["std"].as_f64().expect("std");
-    assert!(
-        std < 7.0,
-        "position error std after the switch {std:.2} deg"
-    );
+    assert_position_within_7_deg_after_the_switch(log);
     // Judging rail readings by the wattmeter-only filter raises nothing before the short.
     assert_eq!(v["monitors"][0]["false_dtcs"], 0, "{v}");
 }
@@ -288,13 +293,7 @@ drift_deg_per_s = 1.684811
 fn a_drift_that_clipped_at_a_rail_does_not_take_the_position_back() {
     let v = evaluate("throttle_drift_clips", THROTTLE_DRIFT_CLIPS);
     let log = &v["logs"][0];
-    let switched = &log["after_switch"][0];
-    assert_eq!(switched["estimate"], "throttle_angle", "{log}");
-    let std = switched["std"].as_f64().expect("std");
-    assert!(
-        std < 7.0,
-        "position error std after the switch {std:.2} deg"
-    );
+    assert_position_within_7_deg_after_the_switch(log);
     assert_eq!(v["monitors"][0]["false_dtcs"], 0, "{v}");
 }
 
@@ -790,6 +789,46 @@ fn a_quiet_plate_chattering_on_a_mode_boundary_is_no_wattmeter_fault() {
     let v = evaluate("throttle_quiet_boundary", THROTTLE_QUIET_BOUNDARY);
     let log = &v["logs"][0];
     assert_eq!(log["dtcs"].as_array().map(Vec::len), Some(0), "{log}");
+}
+
+// A TPS short at 112 s on a chirp (tuning log 19, cut): the position output comes from the
+// combined filter on the model and the wattmeter. At 124 s the chirp swings the voltage from
+// 0.2 to 1 V and the plate rises to 65 deg, but the filter's estimate stayed on the 8 deg mode
+// boundary for 4 s (the identified model holds a plate pushed into it: the velocity state
+// changes scale and sign there, and the wattmeter alone cannot pull the estimate off): error
+// std 15.3 deg after the switch. A filter sitting within 5 deg of a boundary for 0.3 s while the
+// static map stands above 30 deg and far away is re-seeded at the map: 3.4 deg.
+const THROTTLE_CHIRP_SHORT_TRAP: &str = r#"name = "throttle_chirp_short_trap"
+monitor = "throttle"
+duration_s = 135.0
+seed = 1019
+
+[excitation]
+kind = "chirp"
+
+[sensors]
+wattmeter_noise_std_w = 0.1
+tps_noise_std_v = 0.006
+tps_gain = 1.001948
+tps_offset_v = -0.011088
+wattmeter_gain = 1.004857
+
+[plant]
+table1_rel_error = 0.0
+table1_max_draws = 200
+stop_restitution = 0.2
+process_noise_scale = 0.7
+
+[fault]
+kind = "tps_short"
+start_s = 112.0
+"#;
+
+#[test]
+fn the_limp_home_estimate_is_freed_from_the_8_deg_mode_boundary() {
+    let v = evaluate("throttle_chirp_short_trap", THROTTLE_CHIRP_SHORT_TRAP);
+    let log = &v["logs"][0];
+    assert_position_within_7_deg_after_the_switch(log);
 }
 
 // A quiet plate resting on the open stop at 1.05 V (the model's map: 76.5 deg) behind a TPS

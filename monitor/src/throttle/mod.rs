@@ -53,6 +53,7 @@
 //! switches the output (the TPS stays the source).
 
 pub mod config;
+mod map_check;
 mod span_window;
 pub mod step_test;
 mod still_run;
@@ -67,6 +68,7 @@ use fdd_estimators::{NoiseLevel, SigmaPoints, Ukf};
 use nalgebra::{Matrix1, Matrix2, Matrix3, Vector1, Vector2, Vector3};
 
 pub use config::ThrottleMonitorConfig;
+use map_check::MapCheck;
 use span_window::SpanWindow;
 use step_test::{StepTest, StepTestConfig};
 use still_run::StillRun;
@@ -79,6 +81,17 @@ use crate::signal_table::{SignalId, SignalTable};
 /// TPS against: resting on a stop in its model, that filter's covariance collapses to a few
 /// tenths of a degree although the model's static map is degrees off near the stops.
 const DRIFT_SIGMA_FLOOR_DEG: f64 = 3.0;
+/// How many standard deviations of a window mean the wattmeter-only filter's innovation must
+/// exceed the static map's residual by before the filter is re-seeded at the map.
+const MAP_CHECK_SIGMA: f64 = 5.0;
+/// The map check's window and settle (readings) and the voltage change that ends a hold (V).
+const MAP_CHECK_WINDOW: u32 = 200;
+const MAP_CHECK_SETTLE: u32 = 200;
+const MAP_CHECK_STEADY_V: f64 = 0.01;
+/// A filter whose angle stays within this many degrees of a mode boundary for `TRAP_STEPS`
+/// while the static map is far above is held there by the model, not by the plate.
+const TRAP_BAND_DEG: f64 = 5.0;
+const TRAP_STEPS: u32 = 300;
 /// Capacity of the fixed rings (NIS window, motion window, dropout times).
 const RING: usize = 512;
 /// Time constant of the low-pass through which the TPS's standing still across holds is
@@ -278,6 +291,12 @@ pub struct ThrottleMonitor {
     eq_hist: SpanWindow,
     /// The TPS standing still across holds, and the static map's range meanwhile.
     still: StillRun,
+    map_check: MapCheck,
+    /// The same check on the combined filter while it runs without the TPS.
+    map_check_both: MapCheck,
+    /// Steps each filter has sat on a mode boundary far from the static map (see `trapped`).
+    trap_run_wo: u32,
+    trap_run_both: u32,
     rail_persist: u32,
     /// Samples in a row whose rail reading the wattmeter-only filter rules out, and how many
     /// make that a rail fault (`watt_rail_persist_s`).
@@ -582,6 +601,10 @@ impl ThrottleMonitor {
             )?,
             tps_hist: SpanWindow::new(motion),
             eq_hist: SpanWindow::new(motion),
+            map_check: MapCheck::new(MAP_CHECK_WINDOW, MAP_CHECK_SETTLE, MAP_CHECK_STEADY_V),
+            map_check_both: MapCheck::new(MAP_CHECK_WINDOW, MAP_CHECK_SETTLE, MAP_CHECK_STEADY_V),
+            trap_run_wo: 0,
+            trap_run_both: 0,
             still: StillRun::new(
                 cfg.static_tps_range_deg,
                 STILL_TPS_TAU_S,
@@ -677,6 +700,10 @@ impl ThrottleMonitor {
         self.tps_ukf = self.tps_ukf_init.clone();
         self.both_ukf = self.both_ukf_init.clone();
         self.watt_ukf = self.watt_ukf_init.clone();
+        self.map_check.clear();
+        self.map_check_both.clear();
+        self.trap_run_wo = 0;
+        self.trap_run_both = 0;
         self.first_result = TestResult::NOT_TESTED;
         self.tps_fault = None;
         self.watt_fault = None;
@@ -793,6 +820,73 @@ impl ThrottleMonitor {
     }
 
     /// The wattmeter-only filter's plate angle and its standard deviation (deg).
+    /// Whether the static map `eq` explains the wattmeter over a steady hold clearly better than
+    /// the wattmeter-only filter (window means of the reading less each one's prediction, W)
+    /// while lying farther from the filter's angle than the map's own error: the filter is on a
+    /// wrong branch (see `map_check`).
+    fn map_explains_better(
+        &self,
+        filter: (f64, f64),
+        filter_w: f64,
+        map_w: f64,
+        eq: &Vector3<f64>,
+    ) -> bool {
+        let r = self.watt_noise.variance() + self.cfg.wattmeter_r_floor;
+        let sigma_mean = (r / f64::from(MAP_CHECK_WINDOW)).sqrt();
+        let far = self.far_from_map(filter, eq);
+        let (theta, theta_eq) = (filter.0, self.model.angle_deg(eq));
+        let better = filter_w.abs() - map_w.abs() > MAP_CHECK_SIGMA * sigma_mean;
+        if far && better {
+            tracing::debug!(
+                theta,
+                theta_eq,
+                filter_w,
+                map_w,
+                "filter re-seeded at the static map"
+            );
+        }
+        far && better
+    }
+
+    /// Whether a filter's angle (deg, with its standard deviation) lies farther from the static
+    /// map `eq` than the map's own error and the filter's spread allow.
+    fn far_from_map(&self, filter: (f64, f64), eq: &Vector3<f64>) -> bool {
+        let (theta, sigma) = filter;
+        let theta_eq = self.model.angle_deg(eq);
+        (theta - theta_eq).abs()
+            > self.cfg.static_map_error_frac * theta_eq.abs()
+                + 2.0 * sigma.max(DRIFT_SIGMA_FLOOR_DEG)
+    }
+
+    /// Counts the steps a filter's angle has stayed within `TRAP_BAND_DEG` of a mode boundary
+    /// while far from the static map `eq`; true (and the count restarts) after `TRAP_STEPS`.
+    fn trapped(&self, run: u32, filter: (f64, f64), eq: &Vector3<f64>) -> (u32, bool) {
+        let near = self
+            .model
+            .params()
+            .mode_upper_deg
+            .iter()
+            .any(|b| (filter.0 - b).abs() < TRAP_BAND_DEG);
+        // Only a map well above the boundaries counts: below `static_map_from_deg` it is
+        // degrees off for a plant a percent off Table I.
+        let above = self.model.angle_deg(eq) >= self.cfg.static_map_from_deg;
+        let run = if near && above && self.far_from_map(filter, eq) {
+            run.saturating_add(1)
+        } else {
+            0
+        };
+        if run >= TRAP_STEPS {
+            tracing::debug!(
+                theta = filter.0,
+                theta_eq = self.model.angle_deg(eq),
+                "filter freed from a mode boundary"
+            );
+            (0, true)
+        } else {
+            (run, false)
+        }
+    }
+
     fn watt_only_angle(&self) -> (f64, f64) {
         let sigma =
             self.watt_ukf.covariance()[(0, 0)].max(0.0).sqrt() / self.model.params().angle_scale;
@@ -1508,8 +1602,39 @@ impl Monitor for ThrottleMonitor {
                     sigma_w = inn.covariance[(1, 1)].sqrt();
                     predicted_w = watt.unwrap_or(0.0) - inn.residual[1];
                 }
-                if !use_tps && self.reacquire.observe(inn.nis, inn.dof) {
+                // Without the TPS this filter runs on the model and the wattmeter, and can
+                // settle on a wrong branch like the wattmeter-only one.
+                let map_says = match (tps_trusted, use_watt, watt) {
+                    (false, true, Some(w)) => self
+                        .map_check_both
+                        .push(u, inn.residual[1], w - eq[2] * eq[2])
+                        .is_some_and(|(filter_w, map_w)| {
+                            let x = self.both_ukf.state();
+                            let sigma = self.both_ukf.covariance()[(0, 0)].max(0.0).sqrt()
+                                / self.model.params().angle_scale;
+                            let angle = (self.model.angle_deg(x), sigma);
+                            self.map_explains_better(angle, filter_w, map_w, &eq)
+                        }),
+                    _ => {
+                        self.map_check_both.clear();
+                        false
+                    }
+                };
+                let trap = if tps_trusted {
+                    self.trap_run_both = 0;
+                    false
+                } else {
+                    let x = self.both_ukf.state();
+                    let sigma = self.both_ukf.covariance()[(0, 0)].max(0.0).sqrt()
+                        / self.model.params().angle_scale;
+                    let (run, t) =
+                        self.trapped(self.trap_run_both, (self.model.angle_deg(x), sigma), &eq);
+                    self.trap_run_both = run;
+                    t
+                };
+                if !use_tps && (self.reacquire.observe(inn.nis, inn.dof) || map_says || trap) {
                     let _reset_ok = self.both_ukf.reset(eq, self.p0).is_ok();
+                    self.map_check_both.clear();
                 }
                 out(Output::Innovation {
                     filter: "combined",
@@ -1531,10 +1656,22 @@ impl Monitor for ThrottleMonitor {
                 z_wo = inn.normalized(0);
                 sigma_wo = inn.covariance[(0, 0)].sqrt();
                 predicted_wo = w - inn.residual[0];
-                if self.watt_reacquire.observe(inn.nis, inn.dof) {
+                let map_w = w - eq[2] * eq[2];
+                let reseed = self.watt_reacquire.observe(inn.nis, inn.dof)
+                    || self.map_check.push(u, inn.residual[0], map_w).is_some_and(
+                        |(filter_w, map_w)| {
+                            self.map_explains_better(self.watt_only_angle(), filter_w, map_w, &eq)
+                        },
+                    );
+                let (run, trap) = self.trapped(self.trap_run_wo, self.watt_only_angle(), &eq);
+                self.trap_run_wo = run;
+                if reseed || trap {
                     let _reset_ok = self.watt_ukf.reset(eq, self.p0).is_ok();
+                    self.map_check.clear();
                 }
             }
+        } else {
+            self.map_check.clear();
         }
         // A wattmeter lagging the current by up to `watt_lag_tolerance_s` misses the predicted
         // reading by up to that times its rate: allowed for on top of the innovation variance.
