@@ -9,7 +9,7 @@ everything a new vehicle would change (fixtures/sets/README.md says how):
   0.4 W, TPS noise 4-10 mV, TPS gain/offset within 1.5 % / 15 mV, wattmeter gain within 4 %,
   lags, Table I error up to 1 %, restitution 0.2, fault sizes as the committed fixtures',
   process noise x0.5 to x2 and a block of quiet plates (x0.05 to x0.3);
-- held-out: seeds 31000+ (version 14), excitation steady_holds / idle_blips / mixed, wattmeter noise 0.05 to
+- held-out: seeds 33000+ (version 15), excitation steady_holds / idle_blips / mixed, wattmeter noise 0.05 to
   0.5 W, Table I error up to 1.5 %, stops and restitution, TPS and wattmeter gain and offset
   errors and lags, process noise x0.08 to x2, fault sizes 0.75 to 1.5 times the fixtures',
   long fault-free driving (>= 10 h in all).
@@ -311,7 +311,7 @@ def tuning():
 
 
 def heldout():
-    # Version 14 (seeds 31000+, random.Random(32)). Version 1 (seeds 5000+) was evaluated once,
+    # Version 15 (seeds 33000+, random.Random(34)). Version 1 (seeds 5000+) was evaluated once,
     # with a tuning set that lacked sensor tolerances, lags and stop restitution; version 2
     # (seeds 7000+, random.Random(6)) once after the step test and the allowances; version 3
     # (seeds 9000+, random.Random(8)) once before the frozen-TPS test and the wattmeter-only
@@ -333,9 +333,11 @@ def heldout():
     # plate test's map "since the TPS last moved", the rail check's map allowance), whose
     # process noise it did not draw; version 13 (seeds 29000+, random.Random(30)) once before
     # the wattmeter test's mode-boundary allowance and the wattmeter-fed filters' boundary-trap
-    # and steady-hold re-seeds. All thirteen are retired (README).
-    rng = random.Random(32)
-    base = 31000
+    # and steady-hold re-seeds; version 14 (seeds 31000+, random.Random(32)) once before those
+    # re-seeds kept to a static map between static_map_from_deg and the open stop's margin.
+    # All fourteen are retired (README).
+    rng = random.Random(34)
+    base = 33000
     styles = ["steady_holds", "idle_blips", "mixed"]
     items = []
     n = 0
@@ -405,7 +407,7 @@ def calibration():
     30-minute fault-free log to calibrate on (`throttle_calibrate_train/`) and logs of the same
     plant (`plant.seed`) with other seeds, excitation styles and fault sizes 0.75-1.5x to judge
     the calibrated and the default configuration on (`throttle_calibrate_heldout/`)."""
-    rng = random.Random(25)
+    rng = random.Random(29)
     sensors = {
         "wattmeter_noise_std_w": 0.6,
         "tps_noise_std_v": 0.008,
@@ -430,14 +432,15 @@ def calibration():
     held = []
     styles = ["pulse_train", "chirp", "pedal_ramps", "steady_holds", "idle_blips"]
     n = 0
-    # Version 5 (seeds 3500+, random.Random(25); the plant of the issue's example: Table I
+    # Version 7 (seeds 3700+, random.Random(29); the plant of the issue's example: Table I
     # 20 % off, wattmeter 0.6 W): 20 fault-free drives of 30 min (10 h) and 9 fault kinds x 3.
-    # Version 4 (seeds 3400+, random.Random(24), the same plant), version 3 (seeds 3300+, random.Random(23), the same plant), version 2 (seeds 3200+,
+    # Version 6 (seeds 3600+, random.Random(27), the same plant), version 5 (seeds 3500+,
+    # random.Random(25)), version 4 (seeds 3400+, random.Random(24), the same plant), version 3 (seeds 3300+, random.Random(23), the same plant), version 2 (seeds 3200+,
     # random.Random(22), Table I 2 %, wattmeter 0.9 W) and version 1 (seeds 3100+, 2 drives and
     # 9 x 2, random.Random(21)) were evaluated once and are retired.
     for i in range(20):
         name = "throttle_calibrate_heldout_%02d_nominal" % n
-        held.append((name, scenario(name, 3500 + n, 1800, {"kind": styles[n % len(styles)]},
+        held.append((name, scenario(name, 3700 + n, 1800, {"kind": styles[n % len(styles)]},
                                     sensors, plant, {"kind": "none"},
                                     comment="calibration held-out: 30 min fault-free")))
         n += 1
@@ -447,7 +450,7 @@ def calibration():
             scale = rng.uniform(0.75, 1.5)
             f = fault_table(rng, kind, start, scale)
             name = "throttle_calibrate_heldout_%02d_%s" % (n, kind)
-            held.append((name, scenario(name, 3500 + n, start + 60,
+            held.append((name, scenario(name, 3700 + n, start + 60,
                                         {"kind": styles[n % len(styles)]}, sensors, plant, f,
                                         comment="calibration held-out: %s from %g s, size x%.2f"
                                         % (kind, start, scale))))

@@ -850,12 +850,18 @@ impl ThrottleMonitor {
 
     /// Whether a filter's angle (deg, with its standard deviation) lies farther from the static
     /// map `eq` than the map's own error and the filter's spread allow.
+    /// Only where the map is worth judging by: from `static_map_from_deg` (below, in the
+    /// breakaway region, a plant a percent off Table I rests degrees away from it) up to where a
+    /// plant `static_map_error_frac` off rests on the open stop (a map there says nothing: a
+    /// re-identified model at its stability bound puts most voltages on the stop).
     fn far_from_map(&self, filter: (f64, f64), eq: &Vector3<f64>) -> bool {
         let (theta, sigma) = filter;
         let theta_eq = self.model.angle_deg(eq);
-        (theta - theta_eq).abs()
-            > self.cfg.static_map_error_frac * theta_eq.abs()
-                + 2.0 * sigma.max(DRIFT_SIGMA_FLOOR_DEG)
+        let top = self.model.params().angle_limits_deg[1] / (1.0 + self.cfg.static_map_error_frac);
+        (self.cfg.static_map_from_deg..=top).contains(&theta_eq)
+            && (theta - theta_eq).abs()
+                > self.cfg.static_map_error_frac * theta_eq.abs()
+                    + 2.0 * sigma.max(DRIFT_SIGMA_FLOOR_DEG)
     }
 
     /// Counts the steps a filter's angle has stayed within `TRAP_BAND_DEG` of a mode boundary
@@ -867,10 +873,7 @@ impl ThrottleMonitor {
             .mode_upper_deg
             .iter()
             .any(|b| (filter.0 - b).abs() < TRAP_BAND_DEG);
-        // Only a map well above the boundaries counts: below `static_map_from_deg` it is
-        // degrees off for a plant a percent off Table I.
-        let above = self.model.angle_deg(eq) >= self.cfg.static_map_from_deg;
-        let run = if near && above && self.far_from_map(filter, eq) {
+        let run = if near && self.far_from_map(filter, eq) {
             run.saturating_add(1)
         } else {
             0
