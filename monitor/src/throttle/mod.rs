@@ -819,7 +819,6 @@ impl ThrottleMonitor {
         static_tps && (window || since || away)
     }
 
-    /// The wattmeter-only filter's plate angle and its standard deviation (deg).
     /// Whether the static map `eq` explains the wattmeter over a steady hold clearly better than
     /// the wattmeter-only filter (window means of the reading less each one's prediction, W)
     /// while lying farther from the filter's angle than the map's own error: the filter is on a
@@ -850,7 +849,8 @@ impl ThrottleMonitor {
 
     /// Whether a filter's angle (deg, with its standard deviation) lies farther from the static
     /// map `eq` than the map's own error and the filter's spread allow.
-    /// Only where the map is worth judging by: from `static_map_from_deg` (below, in the
+    ///
+    /// Judged only where the map is worth judging by: from `static_map_from_deg` (below, in the
     /// breakaway region, a plant a percent off Table I rests degrees away from it) up to where a
     /// plant `static_map_error_frac` off rests on the open stop (a map there says nothing: a
     /// re-identified model at its stability bound puts most voltages on the stop).
@@ -890,6 +890,7 @@ impl ThrottleMonitor {
         }
     }
 
+    /// The wattmeter-only filter's plate angle and its standard deviation (deg).
     fn watt_only_angle(&self) -> (f64, f64) {
         let sigma =
             self.watt_ukf.covariance()[(0, 0)].max(0.0).sqrt() / self.model.params().angle_scale;
