@@ -890,6 +890,13 @@ impl ThrottleMonitor {
         }
     }
 
+    /// The combined filter's plate angle and its standard deviation (deg).
+    fn combined_angle(&self) -> (f64, f64) {
+        let sigma =
+            self.both_ukf.covariance()[(0, 0)].max(0.0).sqrt() / self.model.params().angle_scale;
+        (self.model.angle_deg(self.both_ukf.state()), sigma)
+    }
+
     /// The wattmeter-only filter's plate angle and its standard deviation (deg).
     fn watt_only_angle(&self) -> (f64, f64) {
         let sigma =
@@ -1176,11 +1183,9 @@ impl ThrottleMonitor {
         if let Some(d) = self.tps_fault {
             // The TPS agrees with the combined filter, which runs without it while it is
             // failed (on the model and the wattmeter).
-            let x = self.both_ukf.state();
-            let sigma = self.both_ukf.covariance()[(0, 0)].max(0.0).sqrt()
-                / self.model.params().angle_scale;
+            let (theta, sigma) = self.combined_angle();
             if let Some(v) = tps {
-                let gap = v / self.volts_per_deg - self.model.angle_deg(x);
+                let gap = v / self.volts_per_deg - theta;
                 let close = gap.abs() <= self.cfg.heal_agreement_deg + 2.0 * sigma;
                 self.heal_disagree_run = if close {
                     0
@@ -1613,11 +1618,7 @@ impl Monitor for ThrottleMonitor {
                         .map_check_both
                         .push(u, inn.residual[1], w - eq[2] * eq[2])
                         .is_some_and(|(filter_w, map_w)| {
-                            let x = self.both_ukf.state();
-                            let sigma = self.both_ukf.covariance()[(0, 0)].max(0.0).sqrt()
-                                / self.model.params().angle_scale;
-                            let angle = (self.model.angle_deg(x), sigma);
-                            self.map_explains_better(angle, filter_w, map_w, &eq)
+                            self.map_explains_better(self.combined_angle(), filter_w, map_w, &eq)
                         }),
                     _ => {
                         self.map_check_both.clear();
@@ -1628,11 +1629,7 @@ impl Monitor for ThrottleMonitor {
                     self.trap_run_both = 0;
                     false
                 } else {
-                    let x = self.both_ukf.state();
-                    let sigma = self.both_ukf.covariance()[(0, 0)].max(0.0).sqrt()
-                        / self.model.params().angle_scale;
-                    let (run, t) =
-                        self.trapped(self.trap_run_both, (self.model.angle_deg(x), sigma), &eq);
+                    let (run, t) = self.trapped(self.trap_run_both, self.combined_angle(), &eq);
                     self.trap_run_both = run;
                     t
                 };
