@@ -367,6 +367,9 @@ fn thirty_minute_nominal_drive_raises_nothing() {
     assert!(o.decision.is_none());
 }
 
+/// 60-s drives: a leak and an EGR valve stuck open differ on tip-outs by about 2 % of their
+/// isolation statistics, and the isolation margin of 300 is reached 20 to 45 s after the onset
+/// (the group DTC comes within a second).
 #[test]
 fn faults_are_isolated_over_several_seeds() {
     let profile = ProfileSpec::TipInOut(TipInOutSpec {
@@ -438,7 +441,7 @@ fn faults_are_isolated_over_several_seeds() {
     ];
     for (fault, event, candidate) in faults {
         for seed in 101..=106 {
-            let sc = IntakeScenario::new("seeds", 30.0, seed, profile, fault);
+            let sc = IntakeScenario::new("seeds", 60.0, seed, profile, fault);
             let o = run(sim_frames(sc));
             check(
                 &format!("{} seed {seed}", fault.name()),

@@ -1583,11 +1583,13 @@ impl IntakeMonitor {
         };
         // A repeated reading is a stuck sensor in the making: the frozen check names it.
         let repeating = self.map_frozen_run > 0 || self.maf_frozen_run > 0;
-        // The hypotheses still in the race: within the group margin of the best.
+        // The hypotheses still in the race: within the group margin of the best, and never
+        // fewer than those that keep the best from being named (the isolation margins).
         let margin = self
             .cfg
             .group_margin
-            .max(self.cfg.group_margin_rel * best.glr);
+            .max(self.cfg.isolation_margin)
+            .max(self.cfg.group_margin_rel.max(self.cfg.isolation_margin_rel) * best.glr);
         let in_race = |f: &Fit| f.glr > 0.0 && f.glr >= best.glr - margin;
         // A decided fault still in the race: what is left of it after its compensation (a
         // size that has changed, a drift) explains the alarm as well as a new fault would.
@@ -1800,6 +1802,8 @@ impl IntakeMonitor {
             parameter = best.parameter,
             gain = best.gain,
             glr = best.glr,
+            runner_up = ranked[1].fault.name(),
+            runner_up_glr = ranked[1].glr,
             "intake fault isolated"
         );
     }
