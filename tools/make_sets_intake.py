@@ -374,10 +374,35 @@ def calibration():
     return train, heldout
 
 
+def dev_set():
+    """A development set, not committed: the held-out recipe (styles, plants, sizes) with other
+    seeds (300000 + i, generator seed 99), to try a change on before a held-out version is
+    spent. Session 2026-12-06 chose the isolation margin on it and on the tuning set."""
+    return make_set(
+        "idev", random.Random(99), 300000, 3, HELDOUT_STYLES, "idle_blips", (600.0, 720.0),
+        (90.0, 180.0),
+        nominal=[],
+        doubles=[
+            (("map_bias", "egr_stuck_closed"), "speed_sweep", False),
+            (("leak", "map_drift"), "pedal_ramps", True),
+        ],
+    )
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--check", action="store_true", help="compare, write nothing")
+    ap.add_argument("--dev", metavar="DIR",
+                    help="write the development set (not committed) into DIR, nothing else")
     args = ap.parse_args()
+    if args.dev:
+        os.makedirs(args.dev, exist_ok=True)
+        files = dev_set()
+        for name, text in sorted(files.items()):
+            with open(os.path.join(args.dev, name + ".toml"), "w", encoding="utf-8") as f:
+                f.write(text)
+        print("dev set: %d files in %s" % (len(files), args.dev))
+        return 0
     bad = 0
     for set_name, files in all_sets().items():
         d = os.path.join(SETS, set_name)

@@ -458,7 +458,54 @@ def calibration():
     return train, held
 
 
+def calibration_dev():
+    """A development set of the calibration plant, not committed (`--dev DIR`): 8 wattmeter
+    faults and 6 TPS drifts (seeds 9100+, `random.Random(97)`, the six excitation styles) and 6
+    fault-free drives of 30 min (seeds 9200+), to try a calibration or monitor change on before
+    a held-out version is spent (session 2026-12-06: the wattmeter dead band and naming)."""
+    rng = random.Random(97)
+    sensors = {
+        "wattmeter_noise_std_w": 0.6,
+        "tps_noise_std_v": 0.008,
+        "tps_gain": 1.01,
+        "tps_offset_v": 0.01,
+        "wattmeter_gain": 1.02,
+        "tps_lag_s": 0.0015,
+        "wattmeter_lag_s": 0.002,
+    }
+    plant = {
+        "table1_rel_error": 0.2,
+        "table1_max_draws": 1000,
+        "stop_restitution": 0.2,
+        "process_noise_scale": 1.0,
+        "seed": 424242,
+    }
+    styles = ["pulse_train", "chirp", "pedal_ramps", "steady_holds", "idle_blips", "mixed"]
+    items = []
+    for n, kind in enumerate(["wattmeter"] * 8 + ["tps_drift"] * 6):
+        start = float(rng.randint(120, 240))
+        scale = rng.uniform(0.75, 1.5)
+        f = fault_table(rng, kind, start, scale)
+        name = "throttle_cdev_%02d_%s" % (n, kind)
+        items.append((name, scenario(name, 9100 + n, start + 60,
+                                     {"kind": styles[n % len(styles)]}, sensors, plant, f,
+                                     comment="dev")))
+    for i in range(6):
+        name = "throttle_cdevnom_%02d_nominal" % i
+        items.append((name, scenario(name, 9200 + i, 1800, {"kind": styles[i % len(styles)]},
+                                     sensors, plant, {"kind": "none"}, comment="dev nominal")))
+    return items
+
+
 if __name__ == "__main__":
+    if sys.argv[1:2] == ["--dev"] and len(sys.argv) == 3:
+        os.makedirs(sys.argv[2], exist_ok=True)
+        dev = calibration_dev()
+        for name, text in dev:
+            with open(os.path.join(sys.argv[2], name + ".toml"), "w") as f:
+                f.write(text)
+        print("wrote %d development scenarios into %s" % (len(dev), sys.argv[2]))
+        sys.exit(0)
     t = tuning()
     h = heldout()
     ct, ch = calibration()
