@@ -401,6 +401,26 @@ def heldout():
     return items
 
 
+# The calibration plant (Table I 20 % off, wattmeter 0.6 W, a restitution at the stops, sensor
+# tolerances): every log of the calibration sets and of the calibration development set.
+CAL_SENSORS = {
+    "wattmeter_noise_std_w": 0.6,
+    "tps_noise_std_v": 0.008,
+    "tps_gain": 1.01,
+    "tps_offset_v": 0.01,
+    "wattmeter_gain": 1.02,
+    "tps_lag_s": 0.0015,
+    "wattmeter_lag_s": 0.002,
+}
+CAL_PLANT = {
+    "table1_rel_error": 0.2,
+    "table1_max_draws": 1000,
+    "stop_restitution": 0.2,
+    "process_noise_scale": 1.0,
+    "seed": 424242,
+}
+
+
 def calibration():
     """One plant beyond the default configuration's range (Table I 20 % off, against the 1.5 %
     of the tuning set; wattmeter noise 0.6 W; a restitution at the stops, sensor tolerances): a
@@ -408,22 +428,7 @@ def calibration():
     plant (`plant.seed`) with other seeds, excitation styles and fault sizes 0.75-1.5x to judge
     the calibrated and the default configuration on (`throttle_calibrate_heldout/`)."""
     rng = random.Random(29)
-    sensors = {
-        "wattmeter_noise_std_w": 0.6,
-        "tps_noise_std_v": 0.008,
-        "tps_gain": 1.01,
-        "tps_offset_v": 0.01,
-        "wattmeter_gain": 1.02,
-        "tps_lag_s": 0.0015,
-        "wattmeter_lag_s": 0.002,
-    }
-    plant = {
-        "table1_rel_error": 0.2,
-        "table1_max_draws": 1000,
-        "stop_restitution": 0.2,
-        "process_noise_scale": 1.0,
-        "seed": 424242,
-    }
+    sensors, plant = CAL_SENSORS, CAL_PLANT
     train = []
     name = "throttle_calibrate_train_00_nominal"
     train.append((name, scenario(name, 3000, 1800, {"kind": "mixed"}, sensors, plant,
@@ -464,22 +469,7 @@ def calibration_dev():
     fault-free drives of 30 min (seeds 9200+), to try a calibration or monitor change on before
     a held-out version is spent (session 2026-12-06: the wattmeter dead band and naming)."""
     rng = random.Random(97)
-    sensors = {
-        "wattmeter_noise_std_w": 0.6,
-        "tps_noise_std_v": 0.008,
-        "tps_gain": 1.01,
-        "tps_offset_v": 0.01,
-        "wattmeter_gain": 1.02,
-        "tps_lag_s": 0.0015,
-        "wattmeter_lag_s": 0.002,
-    }
-    plant = {
-        "table1_rel_error": 0.2,
-        "table1_max_draws": 1000,
-        "stop_restitution": 0.2,
-        "process_noise_scale": 1.0,
-        "seed": 424242,
-    }
+    sensors, plant = CAL_SENSORS, CAL_PLANT
     styles = ["pulse_train", "chirp", "pedal_ramps", "steady_holds", "idle_blips", "mixed"]
     items = []
     for n, kind in enumerate(["wattmeter"] * 8 + ["tps_drift"] * 6):
