@@ -16,6 +16,9 @@ pub enum ConfigError {
     },
     #[error("{origin}: {message}")]
     Invalid { origin: String, message: String },
+    /// The file is missing, too large or not text.
+    #[error(transparent)]
+    File(Box<crate::text_file::TextFileError>),
 }
 
 fn invalid(origin: &str, message: impl Into<String>) -> ConfigError {
@@ -36,10 +39,7 @@ pub(crate) fn read_or_embedded(
         None => Ok((embedded.into(), format!("embedded {name}"))),
         Some(p) => {
             let origin = p.display().to_string();
-            let text = std::fs::read_to_string(p).map_err(|source| ConfigError::Read {
-                origin: origin.clone(),
-                source,
-            })?;
+            let text = crate::text_file::read_text(p).map_err(|e| ConfigError::File(Box::new(e)))?;
             Ok((text.into(), origin))
         }
     }

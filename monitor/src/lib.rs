@@ -16,4 +16,5 @@ pub mod runtime;
 pub mod scheduler;
 pub mod signal_table;
 pub mod staleness;
+pub mod text_file;
 pub mod throttle;
