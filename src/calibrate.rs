@@ -131,6 +131,13 @@ pub enum CalibrateError {
     Toml { origin: String, message: String },
     #[error("{}: {message}", file.display())]
     Monitor { file: PathBuf, message: String },
+    #[error("{0}")]
+    Argument(String),
+    /// A text file (a configuration, a scenario) that cannot be read; the message names it.
+    #[error(transparent)]
+    Text(#[from] fdd_monitor::text_file::TextFileError),
+    #[error("{}: refusing to write the calibration over {what}; choose another output directory", file.display())]
+    OutputIsInput { file: PathBuf, what: String },
     #[error("monitor `{0}`: fdd calibrate knows `throttle` and `intake`")]
     UnknownMonitor(String),
     #[error("re-identifying the throttle model: {0}")]
@@ -149,6 +156,9 @@ pub struct CalibrateOptions {
     /// Re-identify the throttle model from the logs before the thresholds (default); `false`
     /// keeps the starting configuration's model.
     pub identify: bool,
+    /// Simulate scenario files longer than [`crate::simulate::MAX_SIMULATE_S`]
+    /// (`--allow-long`).
+    pub allow_long: bool,
 }
 
 impl Default for CalibrateOptions {
@@ -157,8 +167,63 @@ impl Default for CalibrateOptions {
             false_alarms_per_hour: 1e-3,
             block_s: 10.0,
             identify: true,
+            allow_long: false,
         }
     }
+}
+
+impl CalibrateOptions {
+    /// Checks the rate and the block length against their ranges
+    /// ([`crate::limits::CALIBRATE_RATE`], [`crate::limits::CALIBRATE_BLOCK`]).
+    pub fn check(&self) -> Result<(), CalibrateError> {
+        crate::limits::CALIBRATE_RATE
+            .check(self.false_alarms_per_hour)
+            .map_err(CalibrateError::Argument)?;
+        crate::limits::CALIBRATE_BLOCK
+            .check(self.block_s)
+            .map_err(CalibrateError::Argument)?;
+        Ok(())
+    }
+}
+
+/// The files `fdd calibrate -o DIR` writes into `DIR`.
+pub const WRITTEN_FILES: [&str; 3] = ["fdd.toml", "throttle.toml", "intake.toml"];
+
+/// Refuses an output directory where the calibration would write over one of its inputs: the
+/// starting configuration (`--config`), a monitor settings file it names, or an input log or
+/// scenario file (files compared as files, [`crate::paths::same_file`]). Checked before the
+/// calibration runs, so nothing is lost and no time is spent.
+pub fn check_output_dir(
+    out: &Path,
+    inputs: &[PathBuf],
+    base: &RuntimeConfig,
+) -> Result<(), CalibrateError> {
+    let mut read: Vec<(PathBuf, &str)> = Vec::new();
+    if Path::new(&base.origin).is_file() {
+        read.push((PathBuf::from(&base.origin), "the --config file"));
+    }
+    for p in [&base.monitors.throttle_config, &base.monitors.intake_config]
+        .into_iter()
+        .flatten()
+    {
+        read.push((p.clone(), "a monitor settings file the configuration names"));
+    }
+    for p in expand_inputs(inputs)? {
+        read.push((p, "an input"));
+    }
+    for name in WRITTEN_FILES {
+        let written = out.join(name);
+        if let Some((_, what)) = read
+            .iter()
+            .find(|(p, _)| crate::paths::same_file(p, &written))
+        {
+            return Err(CalibrateError::OutputIsInput {
+                file: written,
+                what: (*what).to_string(),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// One test's calibration.
@@ -490,10 +555,7 @@ pub(crate) fn monitor_text(
 ) -> Result<(String, String), CalibrateError> {
     match path {
         Some(p) => Ok((
-            std::fs::read_to_string(p).map_err(|source| CalibrateError::Read {
-                file: p.to_path_buf(),
-                source,
-            })?,
+            fdd_monitor::text_file::read_text(p)?,
             p.display().to_string(),
         )),
         None => Ok((default.to_string(), default_origin.to_string())),
@@ -529,7 +591,10 @@ pub(crate) fn replay_input(
             .suffix(".mcap")
             .tempfile()
             .map_err(crate::evaluate::EvaluateError::Temp)?;
-        crate::simulate::simulate(&file.to_string_lossy(), tmp.path()).map_err(|source| {
+        // Scenario lengths were checked against `--allow-long` before the first pass
+        // ([`calibrate_inputs`]).
+        let sim = crate::simulate::SimulateOptions { allow_long: true };
+        crate::simulate::simulate(&file.to_string_lossy(), tmp.path(), &sim).map_err(|source| {
             crate::evaluate::EvaluateError::Simulate {
                 file: file.to_path_buf(),
                 source: Box::new(source),
@@ -550,12 +615,7 @@ pub(crate) fn runtime_naming(
     file: &str,
 ) -> Result<String, CalibrateError> {
     let runtime_text = match base.origin.as_str() {
-        o if Path::new(o).is_file() => {
-            std::fs::read_to_string(o).map_err(|source| CalibrateError::Read {
-                file: o.into(),
-                source,
-            })?
-        }
+        o if Path::new(o).is_file() => fdd_monitor::text_file::read_text(Path::new(o))?,
         _ => fdd_monitor::runtime::config::DEFAULT_RUNTIME_TOML.to_string(),
     };
     let mut doc = parse_doc(&runtime_text, &base.origin)?;
@@ -900,10 +960,7 @@ fn input_monitor(file: &Path, base: &RuntimeConfig) -> Result<String, CalibrateE
         message,
     };
     if file.extension().and_then(|e| e.to_str()) == Some("toml") {
-        let text = std::fs::read_to_string(file).map_err(|source| CalibrateError::Read {
-            file: file.to_path_buf(),
-            source,
-        })?;
+        let text = fdd_monitor::text_file::read_text(file)?;
         let doc = parse_doc(&text, &file.display().to_string())?;
         return doc
             .get("monitor")
@@ -930,7 +987,22 @@ pub fn calibrate_inputs(
     opts: &CalibrateOptions,
     monitor: Option<&str>,
 ) -> Result<Calibrated, CalibrateError> {
+    opts.check()?;
     let logs = expand_inputs(inputs)?;
+    let sim = crate::simulate::SimulateOptions {
+        allow_long: opts.allow_long,
+    };
+    for log in logs
+        .iter()
+        .filter(|l| l.extension().is_some_and(|e| e == "toml"))
+    {
+        crate::simulate::check_length(log, &sim).map_err(|source| {
+            crate::evaluate::EvaluateError::Simulate {
+                file: log.clone(),
+                source: Box::new(source),
+            }
+        })?;
+    }
     let monitor = match monitor {
         Some(m) => m.to_string(),
         None => {

@@ -6,6 +6,8 @@
 pub mod calibrate;
 pub mod config;
 pub mod evaluate;
+pub mod limits;
+pub mod paths;
 pub mod replay;
 pub mod reproduce;
 pub mod simulate;

@@ -7,6 +7,7 @@ use std::process::ExitCode;
 use anyhow::Result;
 use clap::{ArgAction, Parser, Subcommand};
 use fdd::config::ThrottleConfig;
+use fdd::limits;
 use fdd::replay::{ReplayOptions, RuntimeConfig};
 use fdd::reproduce::{intake, table2};
 use tracing_subscriber::EnvFilter;
@@ -43,6 +44,9 @@ enum Command {
         /// List the bundled scenarios (name, monitor, duration, fault) and exit.
         #[arg(long, conflicts_with_all = ["scenario", "out"])]
         list: bool,
+        /// Simulate a scenario longer than 24 h (a throttle day is about 4 GB of log).
+        #[arg(long)]
+        allow_long: bool,
     },
     /// Replay an MCAP log through the configured monitors: DTC events, estimates, a summary.
     ///
@@ -50,7 +54,9 @@ enum Command {
     /// monitor, writes the outputs asked for and prints a summary table (DTCs raised with times;
     /// with ground truth, detection delays and estimate error). Bad messages are counted and
     /// skipped; the exit status is non-zero only when the log cannot be read to its end (the
-    /// summary of what was read is printed first) or an output cannot be written.
+    /// summary of what was read is printed first), not a single message of it can be read
+    /// (every chunk failed to decode), or an output cannot be written. No output (`--out`,
+    /// `--events`, the `--memory` slots) may be the log, the configuration or another output.
     Replay {
         /// The MCAP log.
         log: PathBuf,
@@ -89,6 +95,9 @@ enum Command {
         /// Print the figures as JSON instead of tables.
         #[arg(long)]
         json: bool,
+        /// Simulate scenario files longer than 24 h.
+        #[arg(long)]
+        allow_long: bool,
     },
     /// Calibrate the throttle or the intake monitor on fault-free logs of one plant: its
     /// sensors' noise levels, its model (throttle) or correction range (intake), and every
@@ -105,11 +114,11 @@ enum Command {
         /// Runtime configuration to start from (default: the embedded config/fdd.toml).
         #[arg(long)]
         config: Option<PathBuf>,
-        /// False alarms per hour of each test.
-        #[arg(long, default_value_t = 1e-3)]
+        /// False alarms per hour of each test (above 0, at most 3600).
+        #[arg(long, default_value_t = 1e-3, allow_negative_numbers = true, value_parser = |s: &str| limits::CALIBRATE_RATE.parse(s))]
         false_alarms_per_hour: f64,
-        /// Length of the blocks whose maxima are fitted (s).
-        #[arg(long, default_value_t = 10.0)]
+        /// Length of the blocks whose maxima are fitted (s, 0.1 to 86400).
+        #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = |s: &str| limits::CALIBRATE_BLOCK.parse(s))]
         block_s: f64,
         /// Keep the starting configuration's throttle model instead of re-identifying it.
         #[arg(long)]
@@ -118,6 +127,9 @@ enum Command {
         /// for (a scenario's `monitor` key, the monitor whose topics a log carries).
         #[arg(long)]
         monitor: Option<String>,
+        /// Simulate scenario files longer than 24 h.
+        #[arg(long)]
+        allow_long: bool,
     },
     /// Reproduce a result from one of the source papers.
     Reproduce {
@@ -130,17 +142,18 @@ enum Command {
 enum Reproduce {
     /// Table II of the wattmeter throttle paper: UKF angle error from a wattmeter only.
     Table2 {
-        /// Number of 1 ms samples.
-        #[arg(long, default_value_t = 2_000_000)]
+        /// Number of 1 ms samples (1 to 10^9).
+        #[arg(long, default_value_t = 2_000_000, allow_negative_numbers = true, value_parser = |s: &str| limits::TABLE2_SAMPLES.parse_usize(s))]
         samples: usize,
         /// Seed of excitation, process noise and sensor noise.
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, default_value_t = 1, allow_negative_numbers = true, value_parser = |s: &str| limits::SEED.parse(s))]
         seed: u64,
-        /// Standard deviation of the wattmeter noise (A^2).
-        #[arg(long, default_value_t = 1.0)]
+        /// Standard deviation of the wattmeter noise (A^2, above 0, at most 100).
+        #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = |s: &str| limits::TABLE2_WATTMETER_STD.parse(s))]
         wattmeter_std: f64,
-        /// Also run a bootstrap particle filter with this many particles (reference bound).
-        #[arg(long)]
+        /// Also run a bootstrap particle filter with this many particles (reference bound; 2
+        /// to 10^6).
+        #[arg(long, allow_negative_numbers = true, value_parser = |s: &str| limits::TABLE2_PARTICLES.parse_usize(s))]
         particles: Option<usize>,
         /// Throttle configuration file (default: the embedded config/throttle.toml).
         #[arg(long)]
@@ -150,14 +163,14 @@ enum Reproduce {
     /// the centralized, decentralized and federated EKFs and the raw sensors on a transient
     /// drive, with each filter's cost per step.
     Intake {
-        /// Length of the tip-in/tip-out drive (s).
-        #[arg(long, default_value_t = 120.0)]
+        /// Length of the tip-in/tip-out drive (s, 1 to 3600).
+        #[arg(long, default_value_t = 120.0, allow_negative_numbers = true, value_parser = |s: &str| limits::INTAKE_DURATION.parse(s))]
         duration: f64,
         /// Seed of the profile, process and sensor noise.
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, default_value_t = 1, allow_negative_numbers = true, value_parser = |s: &str| limits::SEED.parse(s))]
         seed: u64,
         /// EGR command during tip-outs (0..1, 0 = no EGR).
-        #[arg(long, default_value_t = 0.3)]
+        #[arg(long, default_value_t = 0.3, allow_negative_numbers = true, value_parser = |s: &str| limits::INTAKE_EGR.parse(s))]
         egr: f64,
     },
 }
@@ -256,9 +269,11 @@ fn run(command: Command) -> Result<()> {
             inputs,
             config,
             json,
+            allow_long,
         } => {
             let cfg = RuntimeConfig::load(config.as_deref())?;
-            let summary = fdd::evaluate::evaluate(&inputs, &cfg, |i, n, file| {
+            let sim = fdd::simulate::SimulateOptions { allow_long };
+            let summary = fdd::evaluate::evaluate(&inputs, &cfg, &sim, |i, n, file| {
                 tracing::info!("[{}/{n}] {}", i + 1, file.display());
             })?;
             if json {
@@ -277,21 +292,17 @@ fn run(command: Command) -> Result<()> {
             block_s,
             keep_model,
             monitor,
+            allow_long,
         } => {
-            if !(false_alarms_per_hour > 0.0 && false_alarms_per_hour.is_finite()) {
-                anyhow::bail!(
-                    "--false-alarms-per-hour {false_alarms_per_hour}: must be a positive number"
-                );
-            }
-            if !(block_s > 0.0 && block_s.is_finite()) {
-                anyhow::bail!("--block-s {block_s}: must be a positive number of seconds");
-            }
-            let cfg = RuntimeConfig::load(config.as_deref())?;
             let opts = fdd::calibrate::CalibrateOptions {
                 false_alarms_per_hour,
                 block_s,
                 identify: !keep_model,
+                allow_long,
             };
+            opts.check()?;
+            let cfg = RuntimeConfig::load(config.as_deref())?;
+            fdd::calibrate::check_output_dir(&out, &inputs, &cfg)?;
             let cal = fdd::calibrate::calibrate_inputs(&inputs, &cfg, &opts, monitor.as_deref())?;
             let written = cal.write(&out)?;
             emit(&format!(
@@ -305,6 +316,7 @@ fn run(command: Command) -> Result<()> {
             scenario,
             out,
             list,
+            allow_long,
         } => {
             if list {
                 return emit(&fdd::simulate::list_bundled()?);
@@ -312,7 +324,8 @@ fn run(command: Command) -> Result<()> {
             let (Some(scenario), Some(out)) = (scenario, out) else {
                 anyhow::bail!("fdd simulate needs a scenario and -o FILE (or --list)");
             };
-            let stats = fdd::simulate::simulate(&scenario, &out)?;
+            let opts = fdd::simulate::SimulateOptions { allow_long };
+            let stats = fdd::simulate::simulate(&scenario, &out, &opts)?;
             emit(&format!(
                 "wrote {}: {} frames, {} messages\n",
                 out.display(),

@@ -4,9 +4,24 @@
 use std::path::{Path, PathBuf};
 
 use fdd_fixtures::scenario::ScenarioError;
-use fdd_fixtures::scenario_file::{AnyScenario, FixtureError};
+use fdd_fixtures::scenario_file::{AnyScenario, AnySim, FixtureError};
 use fdd_fixtures::throttle_log::{LogStats, FIXTURE_WRITE_OPTIONS};
+use fdd_fixtures::{intake_log, throttle_log};
 use fdd_monitor::log::{LogError, LogWriter};
+
+/// Longest simulation `fdd simulate` (and `evaluate`, `calibrate` on scenario files) runs
+/// without `--allow-long` (s): 24 h. A throttle hour is about 3.6 million samples and 170 MB
+/// of log, so a day is already 4 GB; a longer `duration_s` is more likely a typo than meant.
+/// Scenario files cannot ask for more than
+/// [`fdd_fixtures::scenario::MAX_DURATION_S`] (30 days) at all.
+pub const MAX_SIMULATE_S: f64 = 86_400.0;
+
+/// How to simulate.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SimulateOptions {
+    /// Simulate scenarios longer than [`MAX_SIMULATE_S`] (`--allow-long`).
+    pub allow_long: bool,
+}
 
 /// Why a simulation could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -19,6 +34,14 @@ pub enum SimulateError {
     },
     #[error("{}: refusing to write the log over its own scenario file", out.display())]
     OutputIsScenario { out: PathBuf },
+    #[error("{}: refusing to write an MCAP log to a .toml file (a scenario or configuration file's name); give the log a .mcap name", out.display())]
+    OutputIsToml { out: PathBuf },
+    #[error("{origin}: duration_s = {duration_s:?} s is longer than the {max_s:?} s (24 h) fdd simulates without --allow-long (a throttle hour is about 170 MB of log); pass --allow-long to simulate it anyway")]
+    TooLong {
+        origin: String,
+        duration_s: f64,
+        max_s: f64,
+    },
     #[error(transparent)]
     Scenario(#[from] ScenarioError),
     #[error(transparent)]
@@ -34,6 +57,16 @@ pub enum ScenarioSource {
     File(PathBuf),
     /// One of the scenarios embedded in the binary ([`fdd_fixtures::bundled::BUNDLED`]).
     Bundled(&'static str),
+}
+
+impl ScenarioSource {
+    /// How errors name the scenario: the file's path, or `bundled scenario NAME`.
+    pub fn origin(&self) -> String {
+        match self {
+            Self::File(f) => f.display().to_string(),
+            Self::Bundled(name) => format!("bundled scenario {name}"),
+        }
+    }
 }
 
 /// Finds a scenario (throttle or intake): the argument as a path (relative to the working
@@ -98,21 +131,65 @@ pub fn list_bundled() -> Result<String, SimulateError> {
     Ok(out)
 }
 
+/// Refuses the scenario named or located by `scenario` when it is longer than
+/// [`MAX_SIMULATE_S`] and `opts.allow_long` is not set (what [`simulate`] checks first), without
+/// simulating it.
+pub fn check_length(scenario: &Path, opts: &SimulateOptions) -> Result<(), SimulateError> {
+    let (sc, source) = find_scenario(&scenario.to_string_lossy())?;
+    if sc.duration_s() > MAX_SIMULATE_S && !opts.allow_long {
+        return Err(SimulateError::TooLong {
+            origin: source.origin(),
+            duration_s: sc.duration_s(),
+            max_s: MAX_SIMULATE_S,
+        });
+    }
+    Ok(())
+}
+
 /// Runs the scenario named or located by `scenario` and writes its log to `out` with the
 /// fixture writer settings (so `fdd simulate throttle_nominal -o x.mcap` reproduces
 /// `fixtures/data/throttle_nominal.mcap`, and `fdd simulate intake_leak -o x.mcap`
 /// `fixtures/data/intake_leak.mcap`, byte for byte).
-pub fn simulate(scenario: &str, out: &Path) -> Result<LogStats, SimulateError> {
+///
+/// Refuses, before writing anything: an output that is the scenario file itself (compared as
+/// files: the same canonical path, or the same file through a hard link) or any `.toml` path
+/// (a bundled scenario's source file, a configuration); a scenario longer than
+/// [`MAX_SIMULATE_S`] unless `opts.allow_long`; a scenario whose simulator cannot be built.
+pub fn simulate(
+    scenario: &str,
+    out: &Path,
+    opts: &SimulateOptions,
+) -> Result<LogStats, SimulateError> {
     let (sc, source) = find_scenario(scenario)?;
     if let ScenarioSource::File(f) = &source {
-        let same = matches!((f.canonicalize(), out.canonicalize()), (Ok(a), Ok(b)) if a == b);
-        if same {
+        if crate::paths::same_file(f, out) {
             return Err(SimulateError::OutputIsScenario {
                 out: out.to_path_buf(),
             });
         }
     }
+    let origin = source.origin();
+    if out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+    {
+        return Err(SimulateError::OutputIsToml {
+            out: out.to_path_buf(),
+        });
+    }
+    if sc.duration_s() > MAX_SIMULATE_S && !opts.allow_long {
+        return Err(SimulateError::TooLong {
+            origin,
+            duration_s: sc.duration_s(),
+            max_s: MAX_SIMULATE_S,
+        });
+    }
+    // Built before the output is created, so a scenario the simulator refuses leaves no file.
+    let sim = sc.simulator(&origin)?;
     let writer = LogWriter::create_with(out, FIXTURE_WRITE_OPTIONS)?;
-    let (_, stats) = sc.write_log(writer)?;
+    let (_, stats) = match sim {
+        AnySim::Throttle(sim) => throttle_log::write_log(*sim, writer)?,
+        AnySim::Intake(sim) => intake_log::write_log(*sim, writer)?,
+    };
     Ok(stats)
 }

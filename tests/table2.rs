@@ -118,10 +118,15 @@ fn bad_settings_and_config_are_named() {
     let err = run(&cfg, &settings(0, 1, 1.0)).unwrap_err().to_string();
     assert!(err.contains("samples"), "{err}");
 
+    // Filter settings are checked when the file is parsed, naming the file and the key.
     let text = with_line("arm_w0", "1.5");
-    let cfg = ThrottleConfig::parse(&text, "test.toml").expect("parses");
-    let err = run(&cfg, &settings(10, 1, 1.0)).unwrap_err().to_string();
-    assert!(err.contains("w0"), "{err}");
+    let err = ThrottleConfig::parse(&text, "test.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.starts_with("test.toml: [wattmeter_ukf] arm_w0 = 1.5: "),
+        "{err}"
+    );
 
     let text = with_line("dt_s", "-0.001");
     let err = ThrottleConfig::parse(&text, "test.toml")

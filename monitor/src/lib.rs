@@ -5,8 +5,11 @@
 //! - [`signal_table`]: latest value and timestamp per named signal, with staleness detection.
 //! - [`scheduler`] and [`monitor`]: monitors declare their inputs and rate and are stepped at it.
 //! - [`persist`]: the A/B slot store that keeps the event memories across power cycles.
+//! - [`config`] and [`config_key`]: the configuration files, every value checked against its
+//!   range, every error naming the file and the key.
 
 pub mod config;
+pub mod config_key;
 pub mod intake;
 pub mod log;
 pub mod monitor;

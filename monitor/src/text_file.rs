@@ -62,7 +62,10 @@ mod tests {
     #[test]
     fn dev_zero_is_refused_after_the_limit_not_read_forever() {
         let e = read_text_limited(Path::new("/dev/zero"), 1 << 16).unwrap_err();
-        assert!(matches!(e, TextFileError::TooLarge { limit: 65536, .. }), "{e}");
+        assert!(
+            matches!(e, TextFileError::TooLarge { limit: 65536, .. }),
+            "{e}"
+        );
         assert!(e.to_string().contains("/dev/zero"), "{e}");
     }
 

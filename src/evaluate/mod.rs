@@ -144,6 +144,7 @@ fn extension(p: &Path) -> Option<&str> {
 pub fn evaluate(
     inputs: &[PathBuf],
     cfg: &RuntimeConfig,
+    sim: &crate::simulate::SimulateOptions,
     mut progress: impl FnMut(usize, usize, &Path),
 ) -> Result<EvaluateSummary, EvaluateError> {
     let logs = expand_inputs(inputs)?;
@@ -160,7 +161,7 @@ pub fn evaluate(
                 .tempfile()
                 .map_err(EvaluateError::Temp)?;
             let arg = file.to_string_lossy();
-            crate::simulate::simulate(&arg, tmp.path()).map_err(|source| {
+            crate::simulate::simulate(&arg, tmp.path(), sim).map_err(|source| {
                 EvaluateError::Simulate {
                     file: file.clone(),
                     source: Box::new(source),

@@ -93,8 +93,107 @@ pub enum ReplayError {
     Monitor { monitor: String, message: String },
     #[error(transparent)]
     Runtime(#[from] RuntimeError),
-    #[error("{}: refusing to write --{option} over the input log", file.display())]
-    OutputIsInput { file: PathBuf, option: &'static str },
+    #[error("{}: refusing to write --{option} over {what}", file.display())]
+    OutputIsInput {
+        file: PathBuf,
+        option: &'static str,
+        /// What the file already is (`the input log`, `the --config file`, `--events`).
+        what: &'static str,
+    },
+    /// Not one message could be read and every chunk that was tried failed (a compression
+    /// this build cannot decode, a damaged file): an error, not an empty replay.
+    #[error("{}: no message could be read: all {chunks} chunk(s) read failed; the first: {first}", file.display())]
+    NothingRead {
+        file: PathBuf,
+        chunks: u64,
+        first: String,
+    },
+}
+
+/// Whether a reader error is about a whole chunk (its messages skipped).
+fn chunk_error(e: &LogError) -> bool {
+    matches!(
+        e,
+        LogError::BadChunk { .. }
+            | LogError::CrcMismatch {
+                section: fdd_monitor::log::CrcSection::Chunk,
+                ..
+            }
+    )
+}
+
+/// The memory slot files of `--memory BASE` (`BASE.a`, `BASE.b`), as the runtime names them.
+fn memory_slots(base: &Path) -> Vec<PathBuf> {
+    let Some(name) = base.file_name() else {
+        return Vec::new();
+    };
+    ["a", "b"]
+        .iter()
+        .map(|suffix| {
+            let mut n = name.to_os_string();
+            n.push(".");
+            n.push(suffix);
+            base.with_file_name(n)
+        })
+        .collect()
+}
+
+/// Whether two paths are (or would be) one file: the same existing file, or the same path.
+fn same_target(a: &Path, b: &Path) -> bool {
+    crate::paths::same_file(a, b)
+        || match (std::path::absolute(a), std::path::absolute(b)) {
+            (Ok(x), Ok(y)) => x == y,
+            _ => a == b,
+        }
+}
+
+/// Refuses outputs that would overwrite an input (the log, the configuration file) or each
+/// other (`--out` and `--events` the same file, a memory slot among them).
+fn check_outputs(log: &Path, cfg: &RuntimeConfig, opts: &ReplayOptions) -> Result<(), ReplayError> {
+    let mut inputs: Vec<(PathBuf, &'static str)> = vec![(log.to_path_buf(), "the input log")];
+    if Path::new(&cfg.origin).is_file() {
+        inputs.push((PathBuf::from(&cfg.origin), "the --config file"));
+    }
+    for p in [&cfg.monitors.throttle_config, &cfg.monitors.intake_config]
+        .into_iter()
+        .flatten()
+    {
+        inputs.push((p.clone(), "a monitor settings file of the configuration"));
+    }
+    let mut outputs: Vec<(PathBuf, &'static str)> = Vec::new();
+    if let Some(p) = &opts.out {
+        outputs.push((p.clone(), "out"));
+    }
+    if let Some(p) = &opts.events {
+        outputs.push((p.clone(), "events"));
+    }
+    if let Some(base) = &opts.memory {
+        outputs.extend(memory_slots(base).into_iter().map(|p| (p, "memory")));
+    }
+    for (i, (o, option)) in outputs.iter().enumerate() {
+        if let Some((_, what)) = inputs.iter().find(|(p, _)| crate::paths::same_file(p, o)) {
+            return Err(ReplayError::OutputIsInput {
+                file: o.clone(),
+                option,
+                what,
+            });
+        }
+        if let Some((_, other)) = outputs[..i]
+            .iter()
+            .find(|(p, other)| *other != *option && same_target(p, o))
+        {
+            return Err(ReplayError::OutputIsInput {
+                file: o.clone(),
+                option,
+                what: match *other {
+                    "out" => "the --out file",
+                    "events" => "the --events file",
+                    _ => "a --memory slot file",
+                },
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Where the outputs go.
@@ -346,12 +445,14 @@ impl Replayer<'_, '_> {
                     if let Some(obs) = sinks.observer.as_mut() {
                         obs.truth(t, ti, &tm.fault, tm.fault_active, tm.fault_observable);
                     }
+                    // Onsets, activity and observability are kept per truth topic: in a log
+                    // of two subsystems each truth has its own faults.
                     if tm.fault_active && !truth_active[ti] {
-                        sinks.fault_onset(&tm.fault, t);
+                        sinks.fault_onset(ti, msg.topic, &tm.fault, t);
                     }
                     truth_active[ti] = tm.fault_active;
                     if let (Some(obs), Some(prev)) = (tm.fault_observable, truth_prev_ns[ti]) {
-                        sinks.fault_observable(obs && tm.fault_active, t.saturating_sub(prev));
+                        sinks.fault_observable(ti, obs && tm.fault_active, t.saturating_sub(prev));
                     }
                     truth_prev_ns[ti] = Some(t);
                 }
@@ -366,13 +467,6 @@ impl Replayer<'_, '_> {
                 }
             }
         }
-    }
-}
-
-fn same_file(a: &Path, b: &Path) -> bool {
-    match (a.canonicalize(), b.canonicalize()) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => false,
     }
 }
 
@@ -434,26 +528,17 @@ fn replay_with(
     mut observer: Option<&mut dyn ReplayObserver>,
 ) -> Result<ReplaySummary, ReplayError> {
     let started = Instant::now();
-    let mut reader = LogReader::open(log)?;
+    let mut reader = LogReader::open_with(log, cfg.replay.limits.read_options())?;
     let file = reader.file().to_path_buf();
     let read_mode = reader.mode();
 
-    for (path, option) in [(&opts.out, "out"), (&opts.events, "events")] {
-        if let Some(p) = path {
-            if same_file(p, log) {
-                return Err(ReplayError::OutputIsInput {
-                    file: p.clone(),
-                    option,
-                });
-            }
-        }
-    }
+    check_outputs(log, cfg, opts)?;
 
     // Which monitors run: those with at least one input topic in the log. An indexed file
     // lists its channels up front; a file without a usable index is scanned once for them.
     let topics: Vec<String> = match read_mode {
         ReadMode::Indexed => reader.channels().map(|c| c.topic.to_string()).collect(),
-        _ => scan_topics(log),
+        _ => scan_topics(log, cfg),
     };
     let (run, skipped) = monitors_for_log(cfg, &topics);
     for (name, reason) in &skipped {
@@ -513,6 +598,19 @@ fn replay_with(
         Some(p) => Some(LogWriter::create_with(p, WriteOptions::default())?),
     };
     let mut sinks = Sinks::new(events_file, out, &cfg.truth);
+    // A monitor's truth topic is the one whose estimate it outputs; its DTCs detect that
+    // topic's faults (and a monitor of none, the "no signal" monitor, any topic's).
+    sinks.monitor_truth = rt
+        .monitor_names()
+        .filter_map(|m| {
+            let estimates = rt.estimate_names(m).unwrap_or(&[]);
+            let t = cfg
+                .truth
+                .iter()
+                .position(|t| estimates.contains(&t.estimate.as_str()))?;
+            Some((m.to_string(), t))
+        })
+        .collect();
     sinks.classes = rt
         .monitor_names()
         .filter_map(|m| Some((m.to_string(), rt.fault_classes(m)?)))
@@ -544,6 +642,9 @@ fn replay_with(
 
     let (pb, pb_start) = progress_bar(&reader, opts.progress);
     let mut fatal: Option<ReplayError> = None;
+    // Chunks the reader could not decode (their messages skipped), and the first such error:
+    // a log of which not one chunk decodes is an error, not an empty replay.
+    let (mut chunks_failed, mut first_chunk_error) = (0u64, None::<String>);
     while let Some(item) = reader.next_message() {
         match item {
             Ok(msg) => r.handle(&msg),
@@ -551,7 +652,13 @@ fn replay_with(
                 fatal = Some(e.into());
                 break;
             }
-            Err(e) => r.problems.record_log_error(&e),
+            Err(e) => {
+                if chunk_error(&e) {
+                    chunks_failed += 1;
+                    first_chunk_error.get_or_insert_with(|| e.to_string());
+                }
+                r.problems.record_log_error(&e);
+            }
         }
         if let Some(e) = r.sinks.error.take() {
             fatal = Some(e);
@@ -585,6 +692,13 @@ fn replay_with(
     if r.messages == 0 {
         if let Some(e) = fatal {
             return Err(e);
+        }
+        if let Some(first) = first_chunk_error {
+            return Err(ReplayError::NothingRead {
+                file,
+                chunks: chunks_failed,
+                first,
+            });
         }
     }
 
@@ -706,10 +820,10 @@ fn replay_with(
 
 /// The enabled subsystem monitors that would run on `log` (see [`monitors_for_log`]).
 pub(crate) fn monitors_on_log(log: &Path, cfg: &RuntimeConfig) -> Result<Vec<String>, ReplayError> {
-    let reader = LogReader::open(log)?;
+    let reader = LogReader::open_with(log, cfg.replay.limits.read_options())?;
     let topics: Vec<String> = match reader.mode() {
         ReadMode::Indexed => reader.channels().map(|c| c.topic.to_string()).collect(),
-        _ => scan_topics(log),
+        _ => scan_topics(log, cfg),
     };
     Ok(monitors_for_log(cfg, &topics).0)
 }
@@ -757,9 +871,9 @@ fn monitors_for_log(
 
 /// The topics of a log without a usable index, from one pass over it (a truncated file is read
 /// up to its first unreadable record).
-fn scan_topics(log: &Path) -> Vec<String> {
+fn scan_topics(log: &Path, cfg: &RuntimeConfig) -> Vec<String> {
     let mut topics: Vec<String> = Vec::new();
-    let Ok(mut reader) = LogReader::open(log) else {
+    let Ok(mut reader) = LogReader::open_with(log, cfg.replay.limits.read_options()) else {
         return topics;
     };
     while let Some(item) = reader.next_message() {

@@ -117,14 +117,21 @@ pub struct DtcRecord {
     pub status: DtcStatus,
 }
 
-/// A fault of the ground truth.
+/// A fault of the ground truth, as one truth topic reports it (a log with the throttle and the
+/// intake has two, each with its own faults and onsets).
 #[derive(Debug, Clone, PartialEq)]
 pub struct FaultOnset {
+    /// The truth topic (`/truth/throttle`).
+    pub topic: String,
+    /// Index of the truth topic in the configuration's `[[truth]]`.
+    pub truth: usize,
     /// The truth's fault name (`tps_open`).
     pub fault: String,
     /// First log time at which it was active, ns.
     pub onset_ns: u64,
-    /// The first DTC raised (testFailed 0 -> 1) at or after the onset: (DTC, event, time s).
+    /// The first DTC raised (testFailed 0 -> 1) at or after the onset by a monitor of this
+    /// truth topic (the one whose estimate the topic's `[[truth]]` compares), or by a monitor
+    /// of no truth topic (the "no signal" monitor): (DTC, event, time s).
     pub detected: Option<(Dtc, String, f64)>,
     /// Log time during which the truth said the fault was observable (`fault_observable`), from
     /// the onset to the detection (or the end), ns; `None` when the truth does not say.
@@ -168,6 +175,9 @@ pub struct Sinks<'o> {
     pub truths: Vec<TruthTrack>,
     /// Faults seen active in the truth, in order of onset.
     pub onsets: Vec<FaultOnset>,
+    /// Each monitor's truth topic (index into `[[truth]]`: the one whose estimate it outputs);
+    /// a monitor not listed has none.
+    pub monitor_truth: Vec<(String, usize)>,
     /// Outputs of kinds `--out` has no topic for (estimates of other names).
     pub unwritten: u64,
     /// Each monitor's diagnosis classes (the names of its `scores`), for `--out`.
@@ -223,6 +233,7 @@ impl Sinks<'_> {
                 })
                 .collect(),
             onsets: Vec::new(),
+            monitor_truth: Vec::new(),
             unwritten: 0,
             classes: Vec::new(),
             observer: None,
@@ -235,7 +246,7 @@ impl Sinks<'_> {
             obs.output(t_ns, monitor, &o);
         }
         match o {
-            Output::Event(ev) => self.on_event(t_ns, ev),
+            Output::Event(ev) => self.on_event(t_ns, monitor, ev),
             Output::Diagnosis { flagged, scores } => {
                 if self.out.is_some() {
                     let classes = self
@@ -342,7 +353,7 @@ impl Sinks<'_> {
         }
     }
 
-    fn on_event(&mut self, t_ns: u64, ev: &EventView<'_>) {
+    fn on_event(&mut self, t_ns: u64, monitor: &str, ev: &EventView<'_>) {
         self.events += 1;
         let raised = ev.bit_changed(StatusBit::TestFailed) && ev.status_after.test_failed();
         let k = match self.dtcs.iter().position(|d| d.event == ev.event) {
@@ -374,8 +385,14 @@ impl Sinks<'_> {
                 ev.event
             );
             let onset_limit = ev.time_s;
+            let truth = self
+                .monitor_truth
+                .iter()
+                .find(|(m, _)| m == monitor)
+                .map(|(_, t)| *t);
             for f in &mut self.onsets {
-                if f.detected.is_none() && f.onset_ns as f64 * 1e-9 <= onset_limit {
+                let ours = truth.is_none_or(|t| t == f.truth);
+                if ours && f.detected.is_none() && f.onset_ns as f64 * 1e-9 <= onset_limit {
                     f.detected = Some((ev.dtc, ev.event.to_string(), ev.time_s));
                 }
             }
@@ -409,10 +426,14 @@ impl Sinks<'_> {
         self.write_out(EVENTS_TOPIC, t_ns, || ev);
     }
 
-    /// The truth says whether the active faults are observable over the `dt_ns` that ends with
-    /// this sample: adds it to every fault not yet detected.
-    pub fn fault_observable(&mut self, observable: bool, dt_ns: u64) {
-        for f in self.onsets.iter_mut().filter(|f| f.detected.is_none()) {
+    /// Truth topic `truth` says whether its active faults are observable over the `dt_ns` that
+    /// ends with this sample: adds it to every fault of that topic not yet detected.
+    pub fn fault_observable(&mut self, truth: usize, observable: bool, dt_ns: u64) {
+        for f in self
+            .onsets
+            .iter_mut()
+            .filter(|f| f.truth == truth && f.detected.is_none())
+        {
             let acc = f.observable_ns.get_or_insert(0);
             if observable {
                 *acc += dt_ns;
@@ -420,17 +441,24 @@ impl Sinks<'_> {
         }
     }
 
-    /// A truth fault became active at `t_ns` (first time for this name).
-    pub fn fault_onset(&mut self, fault: &str, t_ns: u64) {
-        if self.onsets.iter().any(|f| f.fault == fault) {
+    /// A fault of truth topic `truth` (`topic`) became active at `t_ns` (first time for this
+    /// name on this topic).
+    pub fn fault_onset(&mut self, truth: usize, topic: &str, fault: &str, t_ns: u64) {
+        if self
+            .onsets
+            .iter()
+            .any(|f| f.truth == truth && f.fault == fault)
+        {
             return;
         }
         tracing::info!(
             fault,
-            "ground truth: fault '{fault}' active from {:.6} s",
+            "ground truth ({topic}): fault '{fault}' active from {:.6} s",
             t_ns as f64 * 1e-9
         );
         self.onsets.push(FaultOnset {
+            topic: topic.to_string(),
+            truth,
             fault: fault.to_string(),
             onset_ns: t_ns,
             detected: None,

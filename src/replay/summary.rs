@@ -325,6 +325,8 @@ impl ReplaySummary {
                 )?;
             } else {
                 let observable = tr.faults.iter().any(|f| f.observable_ns.is_some());
+                // A log of two subsystems has faults from two truth topics: say whose.
+                let topics = tr.faults.iter().any(|f| f.truth != tr.faults[0].truth);
                 let mut header = vec![
                     "fault",
                     "onset (s)",
@@ -334,6 +336,9 @@ impl ReplaySummary {
                 ];
                 if observable {
                     header.push("of which observable (ms)");
+                }
+                if topics {
+                    header.insert(1, "truth topic");
                 }
                 let mut t = Table::new(&header);
                 for f in &tr.faults {
@@ -346,6 +351,9 @@ impl ReplaySummary {
                         None => ("none".into(), "-".into(), "not detected".into()),
                     };
                     let mut row = vec![f.fault.clone(), secs(f.onset_ns), dtc, at, delay];
+                    if topics {
+                        row.insert(1, f.topic.clone());
+                    }
                     if observable {
                         row.push(
                             f.observable_ns
@@ -395,10 +403,32 @@ fn secs(ns: u64) -> String {
     format!("{:.3}", ns as f64 * 1e-9)
 }
 
-/// A left-aligned text table (numbers right-aligned).
+/// Widest cell a table pads to (characters). A longer cell of a padded column (a topic, field
+/// or fault name of any length is possible in a log or a configuration) is shortened with an
+/// ellipsis in the table and printed in full below it, so the columns stay readable and
+/// nothing is lost; the last column is not padded and is printed whole.
+pub const MAX_CELL_CHARS: usize = 60;
+
+/// A left-aligned text table (numbers right-aligned). Cells are padded by hand, never with a
+/// `{:width$}` format (whose width is limited to 65,535).
 struct Table {
     header: Vec<String>,
     rows: Vec<Vec<String>>,
+}
+
+/// `c` cut to `max` characters, the last one an ellipsis; `None` when it fits.
+fn shortened(c: &str, max: usize) -> Option<String> {
+    if c.chars().count() <= max {
+        return None;
+    }
+    let mut s: String = c.chars().take(max.saturating_sub(1)).collect();
+    s.push('\u{2026}');
+    Some(s)
+}
+
+/// Appends `n` spaces.
+fn pad(s: &mut String, n: usize) {
+    s.extend(std::iter::repeat_n(' ', n));
 }
 
 impl Table {
@@ -413,12 +443,32 @@ impl Table {
         self.rows.push(cells);
     }
 
+    /// Whether column `i` of a row of `n` cells is padded (every column but the last).
+    fn padded(i: usize, n: usize) -> bool {
+        i + 1 < n
+    }
+
+    /// Cell `i` of a row of `n` cells as shown: shortened to [`MAX_CELL_CHARS`] in a padded
+    /// column.
+    fn shown(c: &str, i: usize, n: usize) -> std::borrow::Cow<'_, str> {
+        match shortened(c, MAX_CELL_CHARS).filter(|_| Self::padded(i, n)) {
+            Some(s) => s.into(),
+            None => c.into(),
+        }
+    }
+
     fn widths(&self) -> Vec<usize> {
-        let mut w: Vec<usize> = self.header.iter().map(|h| h.chars().count()).collect();
+        let n = self.header.len();
+        let mut w: Vec<usize> = self
+            .header
+            .iter()
+            .enumerate()
+            .map(|(i, h)| Self::shown(h, i, n).chars().count())
+            .collect();
         for r in &self.rows {
             for (i, c) in r.iter().enumerate() {
                 if i < w.len() {
-                    w[i] = w[i].max(c.chars().count());
+                    w[i] = w[i].max(Self::shown(c, i, r.len()).chars().count());
                 }
             }
         }
@@ -441,34 +491,52 @@ impl Table {
             .collect()
     }
 
-    fn line(
-        s: &mut String,
-        cells: &[String],
-        widths: &[usize],
-        numeric: &[bool],
-    ) -> std::fmt::Result {
+    fn line(s: &mut String, cells: &[String], widths: &[usize], numeric: &[bool]) {
         s.push(' ');
         for (i, c) in cells.iter().enumerate() {
-            let w = widths[i];
+            let c = Self::shown(c, i, cells.len());
+            let w = widths.get(i).copied().unwrap_or(0);
+            let fill = w.saturating_sub(c.chars().count());
             let last = i + 1 == cells.len();
-            if numeric[i] {
-                write!(s, " {c:>w$}")?;
-            } else if last {
-                write!(s, " {c}")?;
+            s.push(' ');
+            if numeric.get(i).copied().unwrap_or(false) {
+                pad(s, fill);
+                s.push_str(&c);
             } else {
-                write!(s, " {c:<w$}")?;
+                s.push_str(&c);
+                if !last {
+                    pad(s, fill);
+                }
             }
         }
         s.push('\n');
-        Ok(())
+    }
+
+    /// The cells shortened in the table, in full: `  (column, row N) text`.
+    fn notes(&self, s: &mut String) {
+        let mut first = true;
+        for (r, row) in self.rows.iter().enumerate() {
+            for (i, c) in row.iter().enumerate() {
+                if Self::padded(i, row.len()) && shortened(c, MAX_CELL_CHARS).is_some() {
+                    if first {
+                        s.push_str("  cells shortened above, in full:\n");
+                        first = false;
+                    }
+                    let column = self.header.get(i).map_or("", String::as_str);
+                    let column = if column.is_empty() { "value" } else { column };
+                    s.push_str(&format!("    {column}, row {}: {c}\n", r + 1));
+                }
+            }
+        }
     }
 
     fn render(&self, s: &mut String) -> std::fmt::Result {
         let (w, n) = (self.widths(), self.numeric());
-        Self::line(s, &self.header, &w, &n)?;
+        Self::line(s, &self.header, &w, &n);
         for r in &self.rows {
-            Self::line(s, r, &w, &n)?;
+            Self::line(s, r, &w, &n);
         }
+        self.notes(s);
         Ok(())
     }
 
@@ -476,8 +544,45 @@ impl Table {
     fn render_plain(&self, s: &mut String) -> std::fmt::Result {
         let (w, n) = (self.widths(), self.numeric());
         for r in &self.rows {
-            Self::line(s, r, &w, &n)?;
+            Self::line(s, r, &w, &n);
         }
+        self.notes(s);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A cell of any length (here 70,000 characters, beyond the 65,535 a `{:width$}` format
+    /// takes) is shortened in its column and printed in full below the table.
+    #[test]
+    fn long_cells_are_shortened_in_the_table_and_kept_below_it() {
+        let long = "t".repeat(70_000);
+        let mut t = Table::new(&["topic", "messages", "used as"]);
+        t.row(vec![long.clone(), "12".into(), "ignored".into()]);
+        t.row(vec!["/a".into(), long.clone(), format!("signal {long}")]);
+        let mut s = String::new();
+        t.render(&mut s).expect("render");
+        let lines: Vec<&str> = s.lines().collect();
+        assert!(
+            lines[..2]
+                .iter()
+                .all(|l| l.chars().count() < 3 * MAX_CELL_CHARS),
+            "{}",
+            &s[..400]
+        );
+        assert!(lines[1].contains('\u{2026}'));
+        // The last column is not padded: printed whole in its row.
+        assert!(lines[2].ends_with(&format!(" signal {long}")));
+        assert!(s.contains(&format!("topic, row 1: {long}\n")));
+        assert!(s.contains(&format!("messages, row 2: {long}\n")));
+        // Short tables are unchanged: columns padded to the widest cell, numbers right-aligned.
+        let mut t = Table::new(&["a", "n", "z"]);
+        t.row(vec!["xyz".into(), "5".into(), "q".into()]);
+        let mut s = String::new();
+        t.render(&mut s).expect("render");
+        assert_eq!(s, "  a   n z\n  xyz 5 q\n");
     }
 }

@@ -147,19 +147,22 @@ impl Acc {
     }
 }
 
+/// Checks the settings against the command line's ranges ([`crate::limits`]): every frame of
+/// the drive is kept in memory.
 fn check(s: &IntakeSettings) -> Result<(), IntakeError> {
-    if !(s.duration_s.is_finite() && s.duration_s >= 1.0 && s.duration_s <= 36_000.0) {
-        return Err(IntakeError::Setting {
+    use crate::limits::{INTAKE_DURATION, INTAKE_EGR};
+    INTAKE_DURATION
+        .check(s.duration_s)
+        .map_err(|reason| IntakeError::Setting {
             name: "duration",
-            reason: format!("{} s is not in [1, 36000]", s.duration_s),
-        });
-    }
-    if !(s.egr_pos >= 0.0 && s.egr_pos <= 1.0) {
-        return Err(IntakeError::Setting {
+            reason,
+        })?;
+    INTAKE_EGR
+        .check(s.egr_pos)
+        .map_err(|reason| IntakeError::Setting {
             name: "egr",
-            reason: format!("{} is not in [0, 1]", s.egr_pos),
-        });
-    }
+            reason,
+        })?;
     Ok(())
 }
 

@@ -101,18 +101,22 @@ impl Scenario {
     }
 }
 
+/// Checks the settings against the command line's ranges ([`crate::limits`]): a sample or
+/// particle count beyond them would run for days or fail to allocate.
 fn check_settings(s: &Table2Settings) -> Result<(), Table2Error> {
-    if s.samples == 0 {
-        return Err(Table2Error::Setting {
-            name: "samples",
-            reason: "must be at least 1".into(),
-        });
-    }
-    if !(s.wattmeter_std > 0.0 && s.wattmeter_std.is_finite()) {
-        return Err(Table2Error::Setting {
-            name: "wattmeter-std",
-            reason: format!("{} is not a positive finite number", s.wattmeter_std),
-        });
+    use crate::limits::{TABLE2_PARTICLES, TABLE2_SAMPLES, TABLE2_WATTMETER_STD};
+    let count = |n: usize| u64::try_from(n).unwrap_or(u64::MAX);
+    let setting = |name: &'static str| move |reason: String| Table2Error::Setting { name, reason };
+    TABLE2_SAMPLES
+        .check(count(s.samples))
+        .map_err(setting("samples"))?;
+    TABLE2_WATTMETER_STD
+        .check(s.wattmeter_std)
+        .map_err(setting("wattmeter-std"))?;
+    if let Some(p) = s.particles {
+        TABLE2_PARTICLES
+            .check(count(p))
+            .map_err(setting("particles"))?;
     }
     Ok(())
 }

@@ -79,6 +79,7 @@ use serde::Deserialize;
 use thiserror::Error;
 
 use crate::model::{ObservationModel, TransitionModel};
+use crate::param::{show, ParamError, Range};
 
 /// The state vector `[p_m, p_mes, W_thr, W_mes, q1, q2]`.
 pub type IntakeState = SVector<f64, 6>;
@@ -164,129 +165,234 @@ pub struct IntakeParams {
     pub maf_noise_rel: f64,
 }
 
-fn positive(name: &'static str, v: f64) -> Result<(), String> {
-    if !v.is_finite() {
-        return Err(format!("`{name}` = {v} is not finite"));
-    }
-    if !(v > 0.0) {
-        return Err(format!("`{name}` = {v} must be positive"));
-    }
-    Ok(())
+/// Admissible ranges of the `[model]` keys: generous physical bounds, so that any engine and
+/// weather the model can describe passes and typos (a unit off by 1e3, a sign) do not.
+pub mod ranges {
+    use crate::param::Range;
+
+    /// Ambient pressure: 10 kPa (far above any road) to 200 kPa.
+    pub const AMBIENT_PRESSURE_PA: Range = Range::closed(1e4, 2e5, "Pa");
+    /// Ambient temperature: -73 C to 127 C.
+    pub const AMBIENT_TEMPERATURE_K: Range = Range::closed(200.0, 400.0, "K");
+    /// Specific gas constant.
+    pub const GAS_CONSTANT: Range = Range::closed(100.0, 1000.0, "J/(kg K)");
+    /// Ratio of specific heats (above 1 for any gas).
+    pub const HEAT_CAPACITY_RATIO: Range = Range::above(1.0, 2.0, "");
+    /// Manifold volume.
+    pub const MANIFOLD_VOLUME_M3: Range = Range::above(0.0, 0.1, "m^3");
+    /// Manifold and EGR gas temperatures.
+    pub const MANIFOLD_TEMPERATURE_K: Range = Range::closed(200.0, 600.0, "K");
+    /// EGR gas temperature at the valve.
+    pub const EGR_TEMPERATURE_K: Range = Range::closed(200.0, 1500.0, "K");
+    /// Throttle bore.
+    pub const BORE_M: Range = Range::above(0.0, 0.5, "m");
+    /// Discharge coefficient.
+    pub const DISCHARGE_COEFFICIENT: Range = Range::above(0.0, 1.0, "");
+    /// Closed plate angle (the effective area needs cos(a0) well above 0).
+    pub const CLOSED_ANGLE_DEG: Range = Range::below(0.0, 45.0, "deg");
+    /// Leakage and EGR valve areas (0: none).
+    pub const AREA_M2: Range = Range::closed(0.0, 0.01, "m^2");
+    /// Exhaust back-pressure upstream of the EGR valve.
+    pub const EGR_PRESSURE_PA: Range = Range::closed(1e4, 1e6, "Pa");
+    /// Speeds of the volumetric-efficiency map.
+    pub const MAP_SPEED_RPM: Range = Range::closed(0.0, 20_000.0, "rpm");
+    /// Volumetric-efficiency slope.
+    pub const VE_SLOPE: Range = Range::above(0.0, 1e-3, "kg/(s Pa)");
+    /// Volumetric-efficiency offset (signed).
+    pub const VE_OFFSET: Range = Range::closed(-1.0, 1.0, "kg/s");
+    /// Sensor time constants: from 0.1 ms to 1 s.
+    pub const SENSOR_TIME_CONSTANT_S: Range = Range::closed(1e-4, 1.0, "s");
+    /// Damping ratio of the (underdamped) pulsation oscillator.
+    pub const PUMP_DAMPING: Range = Range::below(0.0, 1.0, "");
+    /// Accepted engine speeds: below 50 rpm the segment time 30/N (and the number of
+    /// substeps) grows without bound.
+    pub const SPEED_RPM: Range = Range::closed(50.0, 20_000.0, "rpm");
+    /// Longest substep: from 10 us (a 0.6 s segment at 50 rpm is then 60000 substeps) to 10 ms.
+    pub const MAX_SUBSTEP_S: Range = Range::closed(1e-5, 1e-2, "s");
+    /// Largest plausible MAP reading over ambient.
+    pub const MAX_MAP_RATIO: Range = Range::closed(1.0, 5.0, "");
+    /// MAP sensor noise.
+    pub const MAP_NOISE_PA: Range = Range::above(0.0, 1e5, "Pa");
+    /// MAF relative noise.
+    pub const MAF_NOISE_REL: Range = Range::above(0.0, 1.0, "");
 }
 
 impl IntakeParams {
-    /// Checks the ranges the model relies on, naming the offending key.
-    pub fn validate(&self) -> Result<(), String> {
-        let pos = [
-            ("ambient_pressure_pa", self.ambient_pressure_pa),
-            ("ambient_temperature_k", self.ambient_temperature_k),
-            ("gas_constant_j_per_kg_k", self.gas_constant_j_per_kg_k),
-            ("manifold_volume_m3", self.manifold_volume_m3),
-            ("manifold_temperature_k", self.manifold_temperature_k),
-            ("throttle_bore_m", self.throttle_bore_m),
+    /// Checks every key against its range ([`ranges`]) and the relations between them, naming
+    /// the offending key relative to the `[model]` table (`vol_eff_speeds_rpm[3]`).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        use ranges as r;
+        let checks = [
+            (
+                "ambient_pressure_pa",
+                self.ambient_pressure_pa,
+                r::AMBIENT_PRESSURE_PA,
+            ),
+            (
+                "ambient_temperature_k",
+                self.ambient_temperature_k,
+                r::AMBIENT_TEMPERATURE_K,
+            ),
+            (
+                "gas_constant_j_per_kg_k",
+                self.gas_constant_j_per_kg_k,
+                r::GAS_CONSTANT,
+            ),
+            (
+                "heat_capacity_ratio",
+                self.heat_capacity_ratio,
+                r::HEAT_CAPACITY_RATIO,
+            ),
+            (
+                "manifold_volume_m3",
+                self.manifold_volume_m3,
+                r::MANIFOLD_VOLUME_M3,
+            ),
+            (
+                "manifold_temperature_k",
+                self.manifold_temperature_k,
+                r::MANIFOLD_TEMPERATURE_K,
+            ),
+            ("throttle_bore_m", self.throttle_bore_m, r::BORE_M),
             (
                 "throttle_discharge_coefficient",
                 self.throttle_discharge_coefficient,
+                r::DISCHARGE_COEFFICIENT,
             ),
-            ("egr_upstream_pressure_pa", self.egr_upstream_pressure_pa),
-            ("egr_temperature_k", self.egr_temperature_k),
-            ("map_time_constant_s", self.map_time_constant_s),
-            ("maf_time_constant_s", self.maf_time_constant_s),
-            ("min_speed_rpm", self.min_speed_rpm),
-            ("max_speed_rpm", self.max_speed_rpm),
-            ("max_substep_s", self.max_substep_s),
-            ("max_map_ratio", self.max_map_ratio),
-            ("map_noise_std_pa", self.map_noise_std_pa),
-            ("maf_noise_rel", self.maf_noise_rel),
+            (
+                "throttle_closed_angle_deg",
+                self.throttle_closed_angle_deg,
+                r::CLOSED_ANGLE_DEG,
+            ),
+            (
+                "throttle_leak_area_m2",
+                self.throttle_leak_area_m2,
+                r::AREA_M2,
+            ),
+            (
+                "egr_upstream_pressure_pa",
+                self.egr_upstream_pressure_pa,
+                r::EGR_PRESSURE_PA,
+            ),
+            (
+                "egr_temperature_k",
+                self.egr_temperature_k,
+                r::EGR_TEMPERATURE_K,
+            ),
+            ("egr_max_area_m2", self.egr_max_area_m2, r::AREA_M2),
+            (
+                "map_time_constant_s",
+                self.map_time_constant_s,
+                r::SENSOR_TIME_CONSTANT_S,
+            ),
+            (
+                "maf_time_constant_s",
+                self.maf_time_constant_s,
+                r::SENSOR_TIME_CONSTANT_S,
+            ),
+            ("pump_damping", self.pump_damping, r::PUMP_DAMPING),
+            ("min_speed_rpm", self.min_speed_rpm, r::SPEED_RPM),
+            ("max_speed_rpm", self.max_speed_rpm, r::SPEED_RPM),
+            ("max_substep_s", self.max_substep_s, r::MAX_SUBSTEP_S),
+            ("max_map_ratio", self.max_map_ratio, r::MAX_MAP_RATIO),
+            ("map_noise_std_pa", self.map_noise_std_pa, r::MAP_NOISE_PA),
+            ("maf_noise_rel", self.maf_noise_rel, r::MAF_NOISE_REL),
         ];
-        for (k, v) in pos {
-            positive(k, v)?;
+        for (key, v, range) in checks {
+            range.check(key, v)?;
         }
-        let nonneg = [
-            ("throttle_leak_area_m2", self.throttle_leak_area_m2),
-            ("egr_max_area_m2", self.egr_max_area_m2),
-            ("throttle_closed_angle_deg", self.throttle_closed_angle_deg),
-            ("pump_damping", self.pump_damping),
-        ];
-        for (k, v) in nonneg {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("`{k}` = {v} must be finite and >= 0"));
-            }
-        }
-        let k = self.heat_capacity_ratio;
-        if !(k.is_finite() && k > 1.0) {
-            return Err(format!("`heat_capacity_ratio` = {k} must be > 1"));
-        }
-        if !(self.throttle_closed_angle_deg < 45.0) {
-            return Err(format!(
-                "`throttle_closed_angle_deg` = {} must be below 45",
-                self.throttle_closed_angle_deg
-            ));
-        }
-        if !(self.pump_damping < 1.0) {
-            return Err(format!(
-                "`pump_damping` = {} must be below 1 (underdamped oscillator)",
-                self.pump_damping
-            ));
-        }
-        let crit = critical_ratio(k);
-        if !(self.steep_ratio.is_finite() && self.steep_ratio > crit && self.steep_ratio < 1.0) {
-            return Err(format!(
-                "`steep_ratio` = {} must lie between the critical ratio {crit:.4} and 1",
-                self.steep_ratio
+        let crit = critical_ratio(self.heat_capacity_ratio);
+        let steep = Range::open(crit, 1.0, "");
+        if !steep.contains(self.steep_ratio) {
+            return Err(ParamError::new(
+                "steep_ratio",
+                show(self.steep_ratio),
+                format!(
+                    "must lie between the critical ratio {crit:.4} (of heat_capacity_ratio) and 1"
+                ),
             ));
         }
         if !(self.min_speed_rpm < self.max_speed_rpm) {
-            return Err(format!(
-                "`min_speed_rpm` = {} must be below `max_speed_rpm` = {}",
-                self.min_speed_rpm, self.max_speed_rpm
+            return Err(ParamError::new(
+                "max_speed_rpm",
+                show(self.max_speed_rpm),
+                format!(
+                    "must be above `min_speed_rpm` = {}",
+                    show(self.min_speed_rpm)
+                ),
             ));
         }
-        if !(self.max_map_ratio >= 1.0) {
-            return Err(format!(
-                "`max_map_ratio` = {} must be at least 1",
-                self.max_map_ratio
+        let lists = [
+            ("vol_eff_speeds_rpm", self.vol_eff_speeds_rpm.len()),
+            (
+                "vol_eff_slope_kg_per_s_pa",
+                self.vol_eff_slope_kg_per_s_pa.len(),
+            ),
+            (
+                "vol_eff_offset_kg_per_s",
+                self.vol_eff_offset_kg_per_s.len(),
+            ),
+        ];
+        for (key, n) in lists {
+            if !(1..=MAX_MAP_POINTS).contains(&n) {
+                return Err(ParamError::new(
+                    key,
+                    format!("[{n} values]"),
+                    format!("must have 1 to {MAX_MAP_POINTS} values"),
+                ));
+            }
+        }
+        // The three lists must have one length: blame the one that differs from the other two.
+        let [(ks, ns), (kl, nl), (ko, no)] = lists;
+        let odd = if nl == no && ns != nl {
+            Some((ks, ns, nl))
+        } else if ns == no && nl != ns {
+            Some((kl, nl, ns))
+        } else if ns == nl && no != ns {
+            Some((ko, no, ns))
+        } else if ns != nl {
+            Some((kl, nl, ns))
+        } else {
+            None
+        };
+        if let Some((key, n, expected)) = odd {
+            return Err(ParamError::new(
+                key,
+                format!("[{n} values]"),
+                format!("must have one value per speed of the map: {expected} like the other vol_eff_* lists"),
             ));
         }
         let n = self.vol_eff_speeds_rpm.len();
-        if n == 0 {
-            return Err("`vol_eff_speeds_rpm` is empty".into());
-        }
-        if self.vol_eff_slope_kg_per_s_pa.len() != n {
-            return Err(format!(
-                "`vol_eff_slope_kg_per_s_pa` has {} entries, `vol_eff_speeds_rpm` {n}",
-                self.vol_eff_slope_kg_per_s_pa.len()
-            ));
-        }
-        if self.vol_eff_offset_kg_per_s.len() != n {
-            return Err(format!(
-                "`vol_eff_offset_kg_per_s` has {} entries, `vol_eff_speeds_rpm` {n}",
-                self.vol_eff_offset_kg_per_s.len()
-            ));
-        }
         for i in 0..n {
             let s = self.vol_eff_speeds_rpm[i];
-            if !s.is_finite() || (i > 0 && !(s > self.vol_eff_speeds_rpm[i - 1])) {
-                return Err(format!(
-                    "`vol_eff_speeds_rpm[{i}]` = {s} must be finite and strictly increasing"
+            let key = format!("vol_eff_speeds_rpm[{i}]");
+            r::MAP_SPEED_RPM.check(&key, s)?;
+            if i > 0 && !(s > self.vol_eff_speeds_rpm[i - 1]) {
+                return Err(ParamError::new(
+                    key,
+                    show(s),
+                    format!(
+                        "must be above vol_eff_speeds_rpm[{}] = {} (speeds strictly increasing)",
+                        i - 1,
+                        show(self.vol_eff_speeds_rpm[i - 1])
+                    ),
                 ));
             }
-            let sl = self.vol_eff_slope_kg_per_s_pa[i];
-            if !(sl.is_finite() && sl > 0.0) {
-                return Err(format!(
-                    "`vol_eff_slope_kg_per_s_pa[{i}]` = {sl} must be positive"
-                ));
-            }
-            let of = self.vol_eff_offset_kg_per_s[i];
-            if !of.is_finite() {
-                return Err(format!(
-                    "`vol_eff_offset_kg_per_s[{i}]` = {of} is not finite"
-                ));
-            }
+            r::VE_SLOPE.check(
+                &format!("vol_eff_slope_kg_per_s_pa[{i}]"),
+                self.vol_eff_slope_kg_per_s_pa[i],
+            )?;
+            r::VE_OFFSET.check(
+                &format!("vol_eff_offset_kg_per_s[{i}]"),
+                self.vol_eff_offset_kg_per_s[i],
+            )?;
         }
         Ok(())
     }
 }
+
+/// Most speeds of the volumetric-efficiency map.
+pub const MAX_MAP_POINTS: usize = 1000;
 
 /// A refused input or measurement, naming the quantity and its value.
 #[derive(Debug, Clone, Copy, PartialEq, Error)]
@@ -534,7 +640,7 @@ pub struct IntakeModel {
 impl IntakeModel {
     /// Wraps validated parameters; `flow` chooses how the discrete model moves `W_thr`.
     pub fn new(params: IntakeParams, flow: ThrottleFlow) -> Result<Self, String> {
-        params.validate()?;
+        params.validate().map_err(|e| e.to_string())?;
         let r = params.gas_constant_j_per_kg_k;
         Ok(Self {
             gain: r * params.manifold_temperature_k / params.manifold_volume_m3,

@@ -28,6 +28,7 @@ use nalgebra::{Matrix3, SMatrix, Vector1, Vector2, Vector3};
 use serde::Deserialize;
 
 use crate::model::{ObservationModel, TransitionModel};
+use crate::param::{show, ParamError};
 
 /// Identified coefficients of one mode (Table I). Dimensionless except as implied by the state
 /// units: `b` maps volts to amperes per step, `c*` act on `rho`.
@@ -47,6 +48,22 @@ pub struct ThrottleMode {
 }
 
 impl ThrottleMode {
+    /// The coefficients with their keys, in Table I order.
+    pub fn coefficients(&self) -> [(&'static str, f64); 10] {
+        [
+            ("a12", self.a12),
+            ("a21", self.a21),
+            ("a22", self.a22),
+            ("a23", self.a23),
+            ("a32", self.a32),
+            ("a33", self.a33),
+            ("b", self.b),
+            ("c1", self.c1),
+            ("c2", self.c2),
+            ("c3", self.c3),
+        ]
+    }
+
     /// `A_s` of the mode.
     pub fn a(&self) -> Matrix3<f64> {
         Matrix3::new(
@@ -64,52 +81,71 @@ pub struct ThrottleParams {
     /// `x[0] = angle_scale * theta_deg`.
     pub angle_scale: f64,
     /// Upper angle (deg) of mode 1 and of mode 2; mode 3 is above.
+    #[serde(deserialize_with = "crate::param::exact_array")]
     pub mode_upper_deg: [f64; 2],
     /// Mechanical stops (deg).
+    #[serde(deserialize_with = "crate::param::exact_array")]
     pub angle_limits_deg: [f64; 2],
     /// Angle (deg) at which the `c2 sgn(theta - theta_sw)` spring-preload term changes sign.
     pub friction_switch_deg: f64,
-    /// Modes 1, 2, 3.
+    /// Modes 1, 2, 3 (exactly three `[[model.modes]]` tables).
+    #[serde(deserialize_with = "crate::param::exact_array")]
     pub modes: [ThrottleMode; 3],
 }
 
+/// Admissible ranges of the `[model]` keys.
+pub mod ranges {
+    use crate::param::Range;
+
+    /// `dt_s`: from 10 us (a truth simulation over seconds takes 1e5 steps per second) to 1 s.
+    pub const DT_S: Range = Range::closed(1e-5, 1.0, "s");
+    /// `angle_scale`.
+    pub const ANGLE_SCALE: Range = Range::above(0.0, 1e3, "");
+    /// Angles (`mode_upper_deg`, `angle_limits_deg`, `friction_switch_deg`): one turn either way.
+    pub const ANGLE_DEG: Range = Range::closed(-360.0, 360.0, "deg");
+    /// Table I coefficients: identified discrete-time coefficients are of order 1 (Table I's
+    /// largest is 1.89); signed, and zero is admissible.
+    pub const COEFFICIENT: Range = Range::closed(-1e3, 1e3, "");
+}
+
 impl ThrottleParams {
-    /// Checks ranges that the model relies on, naming the offending key.
-    pub fn validate(&self) -> Result<(), String> {
-        let all = [
-            ("dt_s", self.dt_s),
-            ("angle_scale", self.angle_scale),
-            ("mode_upper_deg[0]", self.mode_upper_deg[0]),
-            ("mode_upper_deg[1]", self.mode_upper_deg[1]),
-            ("angle_limits_deg[0]", self.angle_limits_deg[0]),
-            ("angle_limits_deg[1]", self.angle_limits_deg[1]),
-            ("friction_switch_deg", self.friction_switch_deg),
-        ];
-        if let Some((k, v)) = all.iter().find(|(_, v)| !v.is_finite()) {
-            return Err(format!("`{k}` = {v} is not finite"));
+    /// Checks every key against its range ([`ranges`]) and the order of the angles, naming the
+    /// offending key relative to the `[model]` table (`dt_s`, `modes[2].a12`).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        ranges::DT_S.check("dt_s", self.dt_s)?;
+        ranges::ANGLE_SCALE.check("angle_scale", self.angle_scale)?;
+        for (i, v) in self.mode_upper_deg.iter().enumerate() {
+            ranges::ANGLE_DEG.check(&format!("mode_upper_deg[{i}]"), *v)?;
         }
-        if self.dt_s <= 0.0 {
-            return Err(format!("`dt_s` = {} must be positive", self.dt_s));
+        for (i, v) in self.angle_limits_deg.iter().enumerate() {
+            ranges::ANGLE_DEG.check(&format!("angle_limits_deg[{i}]"), *v)?;
         }
-        if self.angle_scale <= 0.0 {
-            return Err(format!(
-                "`angle_scale` = {} must be positive",
-                self.angle_scale
-            ));
-        }
+        ranges::ANGLE_DEG.check("friction_switch_deg", self.friction_switch_deg)?;
         let [lo, hi] = self.angle_limits_deg;
         let [m1, m2] = self.mode_upper_deg;
-        if !(lo < m1 && m1 < m2 && m2 < hi) {
-            return Err(format!(
-                "need angle_limits_deg[0] < mode_upper_deg[0] < mode_upper_deg[1] < angle_limits_deg[1], got {lo} {m1} {m2} {hi}"
-            ));
+        // Each in turn must lie above the one before: name the first that does not.
+        let order = [
+            ("angle_limits_deg[0]", lo),
+            ("mode_upper_deg[0]", m1),
+            ("mode_upper_deg[1]", m2),
+            ("angle_limits_deg[1]", hi),
+        ];
+        for w in order.windows(2) {
+            let ((before, b), (key, v)) = (w[0], w[1]);
+            if !(v > b) {
+                return Err(ParamError::new(
+                    key,
+                    show(v),
+                    format!(
+                        "must be above `{before}` = {} (angle_limits_deg[0] < mode_upper_deg[0] < mode_upper_deg[1] < angle_limits_deg[1])",
+                        show(b)
+                    ),
+                ));
+            }
         }
         for (s, m) in self.modes.iter().enumerate() {
-            let v = [
-                m.a12, m.a21, m.a22, m.a23, m.a32, m.a33, m.b, m.c1, m.c2, m.c3,
-            ];
-            if v.iter().any(|x| !x.is_finite()) {
-                return Err(format!("`modes[{s}]` has a non-finite coefficient"));
+            for (name, v) in m.coefficients() {
+                ranges::COEFFICIENT.check(&format!("modes[{s}].{name}"), v)?;
             }
         }
         Ok(())
@@ -148,7 +184,7 @@ pub(crate) fn sgn(v: f64) -> f64 {
 impl ThrottleModel {
     /// Wraps validated parameters.
     pub fn new(params: ThrottleParams) -> Result<Self, String> {
-        params.validate()?;
+        params.validate().map_err(|e| e.to_string())?;
         Ok(Self { params })
     }
 

@@ -1,10 +1,13 @@
 //! Settings of the intake-manifold monitor (`[monitor]` in `config/intake.toml`). Every key has
 //! a default, so the table may be partial or absent. Units are in the key names.
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
+
+use crate::config::ConfigError;
+use crate::config_key::{check_cusum, KeyPath, Range};
 
 /// Which filter's estimate is the monitor's output (`primary_filter`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum PrimaryFilter {
     /// The centralized EKF on MAP and MAF.
@@ -27,8 +30,9 @@ impl PrimaryFilter {
     }
 }
 
-/// Intake monitor settings.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+/// Intake monitor settings. Every key is checked against its range by
+/// [`IntakeMonitorConfig::validate`].
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct IntakeMonitorConfig {
     /// Runtime signal names: engine speed (rpm), throttle opening (deg from closed), EGR
@@ -48,9 +52,11 @@ pub struct IntakeMonitorConfig {
     /// W_mes (kg/s), q1 (Pa), q2 (Pa/s)]` of the paper's filter model (throttle flow a random
     /// walk). The same values as `fdd reproduce intake`, where they give a mean NIS within 10 %
     /// of 2 on the transient profile.
+    #[serde(deserialize_with = "fdd_estimators::param::exact_array")]
     pub q_std: [f64; 6],
     /// Initial standard deviations: pressures (Pa), flows relative to the initial flow (-),
     /// pulsation (Pa) and its rate (Pa/s), in state order.
+    #[serde(deserialize_with = "fdd_estimators::param::exact_array")]
     pub p0_std: [f64; 6],
     /// MAP noise standard deviation used as R (Pa).
     pub map_noise_pa: f64,
@@ -59,7 +65,8 @@ pub struct IntakeMonitorConfig {
     pub maf_noise_kg_s: f64,
     /// MAF relative noise (-), used for the throttle-model flow residual's variance.
     pub maf_noise_rel: f64,
-    /// Information-sharing factors of the federated filter (MAP local, MAF local).
+    /// Information-sharing factors of the federated filter (MAP local, MAF local), summing to 1.
+    #[serde(deserialize_with = "fdd_estimators::param::exact_array")]
     pub federated_shares: [f64; 2],
     /// Circuit range checks: a MAP reading below `map_low_pa` or above `map_high_ratio * p_a`
     /// (no naturally aspirated manifold gets there), a MAF reading below `maf_low_kg_s` or above
@@ -325,6 +332,311 @@ impl Default for IntakeMonitorConfig {
             dtc_leak: "P2279-00".into(),
             dtc_egr_slow_response: "P0404-00".into(),
             dtc_group: "P0068-00".into(),
+        }
+    }
+}
+
+/// Admissible ranges of the `[monitor]` keys.
+pub mod ranges {
+    use crate::config_key::Range;
+
+    /// `poll_period_s`: from 10 us (a replay of a minute is then 6e6 polls) to 1 s.
+    pub const POLL_PERIOD_S: Range = Range::closed(1e-5, 1.0, "s");
+    /// `q_std`, per state: `[p_m Pa, p_mes Pa, W_thr kg/s, W_mes kg/s, q1 Pa, q2 Pa/s]`
+    /// (process noise may vanish in a state).
+    pub const Q_STD: [Range; 6] = [
+        Range::closed(0.0, 1e5, "Pa"),
+        Range::closed(0.0, 1e5, "Pa"),
+        Range::closed(0.0, 10.0, "kg/s"),
+        Range::closed(0.0, 10.0, "kg/s"),
+        Range::closed(0.0, 1e5, "Pa"),
+        Range::closed(0.0, 1e8, "Pa/s"),
+    ];
+    /// `p0_std`, per state: pressures (Pa), flows relative to the initial flow (-), pulsation
+    /// (Pa) and its rate (Pa/s); the initial covariance must be positive definite.
+    pub const P0_STD: [Range; 6] = [
+        Range::closed(1e-3, 1e6, "Pa"),
+        Range::closed(1e-3, 1e6, "Pa"),
+        Range::closed(1e-6, 100.0, ""),
+        Range::closed(1e-6, 100.0, ""),
+        Range::closed(1e-3, 1e6, "Pa"),
+        Range::closed(1e-3, 1e9, "Pa/s"),
+    ];
+    /// `map_noise_pa`.
+    pub const MAP_NOISE_PA: Range = Range::closed(1e-3, 1e5, "Pa");
+    /// `maf_noise_kg_s`.
+    pub const MAF_NOISE_KG_S: Range = Range::closed(1e-9, 10.0, "kg/s");
+    /// `maf_noise_rel`.
+    pub const NOISE_REL: Range = Range::above(0.0, 1.0, "");
+    /// Each of `federated_shares`.
+    pub const SHARE: Range = Range::open(0.0, 1.0, "");
+    /// Pressure limits and margins.
+    pub const PRESSURE_PA: Range = Range::closed(0.0, 2e5, "Pa");
+    /// Flow limits and margins.
+    pub const FLOW_KG_S: Range = Range::closed(0.0, 10.0, "kg/s");
+    /// `maf_high_kg_s`.
+    pub const FLOW_HIGH_KG_S: Range = Range::above(0.0, 10.0, "kg/s");
+    /// `map_high_ratio` (of ambient).
+    pub const MAP_HIGH_RATIO: Range = Range::closed(1.0, 5.0, "");
+    /// `clip_sigma`.
+    pub const CLIP_SIGMA: Range = Range::above(0.0, 1e3, "sigma");
+    /// Pressure ratios to ambient (`choked_ratio`, `flow_ratio_max`).
+    pub const RATIO: Range = Range::above(0.0, 1.0, "");
+    /// Relative allowances and margins.
+    pub const FRACTION: Range = Range::closed(0.0, 1.0, "");
+    /// NIS cap per segment.
+    pub const NIS: Range = Range::above(0.0, 1e12, "");
+    /// NIS window threshold (calibration sets 1e12 for "out of reach").
+    pub const NIS_SUM: Range = Range::above(0.0, 1e15, "");
+    /// GLR statistics (`isolation_min_glr`).
+    pub const GLR: Range = Range::above(0.0, 1e12, "");
+    /// GLR margins.
+    pub const GLR_MARGIN: Range = Range::closed(0.0, 1e12, "");
+    /// Durations that may be 0.
+    pub const DURATION0_S: Range = Range::closed(0.0, 3600.0, "s");
+    /// Durations that must be positive: from 100 us to an hour.
+    pub const DURATION_S: Range = Range::closed(1e-4, 3600.0, "s");
+    /// Averaging time of the learned corrections and noise levels: at least a second (the
+    /// averages are weighted by segment time over it).
+    pub const ADAPT_TIME_S: Range = Range::closed(1.0, 86_400.0, "s");
+    /// `adapt_min_s`.
+    pub const ADAPT_MIN_S: Range = Range::closed(0.0, 86_400.0, "s");
+    /// `transient_tolerance_s`.
+    pub const LAG_S: Range = Range::closed(0.0, 1.0, "s");
+    /// `ambient_pressure_std_pa`.
+    pub const AMBIENT_STD_PA: Range = Range::closed(0.0, 1e5, "Pa");
+    /// `adapt_limit`.
+    pub const ADAPT_LIMIT: Range = Range::below(0.0, 0.5, "");
+    /// `noise_ratio`: the noisy variance over the learned level.
+    pub const NOISE_RATIO: Range = Range::above(1.0, 1e3, "");
+    /// `noise_threshold`, `residual_heal_llr`: log-likelihood-ratio sums.
+    pub const LLR: Range = Range::above(0.0, 1e6, "");
+    /// `noise_cap`.
+    pub const NOISE_CAP: Range = Range::above(0.0, 1e6, "");
+    /// `noise_learn_limit`.
+    pub const LEARN_LIMIT: Range = Range::closed(1.0, 1e3, "");
+    /// Throttle rates of the noise tests' skip rule (a plate sweeps 90 deg in some 50 ms, so
+    /// anything above some 2000 deg/s never skips; up to 1e9 is accepted as "never").
+    pub const THROTTLE_RATE_DEG_S: Range = Range::above(0.0, 1e9, "deg/s");
+}
+
+impl IntakeMonitorConfig {
+    /// Checks every key against its range and the relations between keys; `at` is the path of
+    /// the `[monitor]` table (errors name `origin: [monitor] key = value: reason`).
+    pub fn validate(&self, at: &KeyPath) -> Result<(), ConfigError> {
+        use ranges as r;
+        let show = crate::config_key::show;
+        for (key, v) in [
+            ("speed_signal", &self.speed_signal),
+            ("throttle_signal", &self.throttle_signal),
+            ("egr_signal", &self.egr_signal),
+            ("map_signal", &self.map_signal),
+            ("maf_signal", &self.maf_signal),
+        ] {
+            at.key(key).check_name(v)?;
+        }
+        at.key("poll_period_s")
+            .check(self.poll_period_s, r::POLL_PERIOD_S)?;
+        for (i, (v, range)) in self.q_std.iter().zip(r::Q_STD).enumerate() {
+            at.key("q_std").index(i).check(*v, range)?;
+        }
+        for (i, (v, range)) in self.p0_std.iter().zip(r::P0_STD).enumerate() {
+            at.key("p0_std").index(i).check(*v, range)?;
+        }
+        let checks: [(&str, f64, Range); 40] = [
+            ("map_noise_pa", self.map_noise_pa, r::MAP_NOISE_PA),
+            ("maf_noise_kg_s", self.maf_noise_kg_s, r::MAF_NOISE_KG_S),
+            ("maf_noise_rel", self.maf_noise_rel, r::NOISE_REL),
+            ("map_low_pa", self.map_low_pa, r::PRESSURE_PA),
+            ("map_low_margin_pa", self.map_low_margin_pa, r::PRESSURE_PA),
+            ("map_high_ratio", self.map_high_ratio, r::MAP_HIGH_RATIO),
+            (
+                "map_high_margin_pa",
+                self.map_high_margin_pa,
+                r::PRESSURE_PA,
+            ),
+            ("maf_low_kg_s", self.maf_low_kg_s, r::FLOW_KG_S),
+            (
+                "maf_low_margin_kg_s",
+                self.maf_low_margin_kg_s,
+                r::FLOW_KG_S,
+            ),
+            ("maf_high_kg_s", self.maf_high_kg_s, r::FLOW_HIGH_KG_S),
+            ("clip_sigma", self.clip_sigma, r::CLIP_SIGMA),
+            ("choked_ratio", self.choked_ratio, r::RATIO),
+            ("flow_ratio_max", self.flow_ratio_max, r::RATIO),
+            ("throttle_model_rel", self.throttle_model_rel, r::FRACTION),
+            ("nis_cap", self.nis_cap, r::NIS),
+            ("nis_threshold", self.nis_threshold, r::NIS_SUM),
+            ("isolation_min_glr", self.isolation_min_glr, r::GLR),
+            ("isolation_margin", self.isolation_margin, r::GLR_MARGIN),
+            (
+                "isolation_margin_rel",
+                self.isolation_margin_rel,
+                r::FRACTION,
+            ),
+            ("isolation_min_s", self.isolation_min_s, r::DURATION0_S),
+            ("isolation_max_s", self.isolation_max_s, r::DURATION_S),
+            ("episode_quiet_s", self.episode_quiet_s, r::DURATION0_S),
+            ("pressure_model_rel", self.pressure_model_rel, r::FRACTION),
+            ("flow_model_rel", self.flow_model_rel, r::FRACTION),
+            (
+                "transient_tolerance_s",
+                self.transient_tolerance_s,
+                r::LAG_S,
+            ),
+            (
+                "ambient_pressure_std_pa",
+                self.ambient_pressure_std_pa,
+                r::AMBIENT_STD_PA,
+            ),
+            ("adapt_time_s", self.adapt_time_s, r::ADAPT_TIME_S),
+            ("adapt_min_s", self.adapt_min_s, r::ADAPT_MIN_S),
+            ("adapt_limit", self.adapt_limit, r::ADAPT_LIMIT),
+            ("noise_ratio", self.noise_ratio, r::NOISE_RATIO),
+            ("noise_threshold", self.noise_threshold, r::LLR),
+            (
+                "noise_max_throttle_rate_deg_s",
+                self.noise_max_throttle_rate_deg_s,
+                r::THROTTLE_RATE_DEG_S,
+            ),
+            (
+                "noise_max_throttle_rate_change_deg_s",
+                self.noise_max_throttle_rate_change_deg_s,
+                r::THROTTLE_RATE_DEG_S,
+            ),
+            ("noise_cap", self.noise_cap, r::NOISE_CAP),
+            ("noise_learn_limit", self.noise_learn_limit, r::LEARN_LIMIT),
+            ("group_after_s", self.group_after_s, r::DURATION0_S),
+            ("group_margin", self.group_margin, r::GLR_MARGIN),
+            ("group_margin_rel", self.group_margin_rel, r::FRACTION),
+            ("heal_s", self.heal_s, r::DURATION0_S),
+            ("residual_heal_llr", self.residual_heal_llr, r::LLR),
+        ];
+        for (key, v, range) in checks {
+            at.key(key).check(v, range)?;
+        }
+        for (i, v) in self.federated_shares.iter().enumerate() {
+            at.key("federated_shares").index(i).check(*v, r::SHARE)?;
+        }
+        let [b0, b1] = self.federated_shares;
+        if ((b0 + b1) - 1.0).abs() > 1e-9 {
+            return Err(at.key("federated_shares").invalid(
+                format!("[{}, {}]", show(b0), show(b1)),
+                format!(
+                    "the information-sharing factors must sum to 1 (they sum to {})",
+                    show(b0 + b1)
+                ),
+            ));
+        }
+        if !(self.isolation_min_s <= self.isolation_max_s) {
+            return Err(at.key("isolation_max_s").invalid(
+                show(self.isolation_max_s),
+                format!(
+                    "must be at least `isolation_min_s` = {} s",
+                    show(self.isolation_min_s)
+                ),
+            ));
+        }
+        at.key("nis_window").check_count(
+            self.nis_window as u64,
+            1,
+            super::NIS_RING as u64,
+            "segments",
+        )?;
+        at.key("circuit_persist_segments").check_count(
+            self.circuit_persist_segments,
+            1,
+            1_000_000,
+            "segments",
+        )?;
+        at.key("frozen_segments")
+            .check_count(self.frozen_segments, 2, 1_000_000, "segments")?;
+        at.key("noise_settle_segments").check_count(
+            self.noise_settle_segments,
+            0,
+            1_000_000,
+            "segments",
+        )?;
+        for (bias, delta, threshold, h) in [
+            (
+                "pressure_cusum_min_bias_sigma",
+                self.pressure_cusum_min_bias_sigma,
+                "pressure_cusum_threshold",
+                self.pressure_cusum_threshold,
+            ),
+            (
+                "flow_cusum_min_bias_sigma",
+                self.flow_cusum_min_bias_sigma,
+                "flow_cusum_threshold",
+                self.flow_cusum_threshold,
+            ),
+            (
+                "throttle_cusum_min_bias_sigma",
+                self.throttle_cusum_min_bias_sigma,
+                "throttle_cusum_threshold",
+                self.throttle_cusum_threshold,
+            ),
+        ] {
+            check_cusum(at, bias, delta, threshold, h)?;
+        }
+        at.check_dtcs(&[
+            ("dtc_map_performance", &self.dtc_map_performance),
+            ("dtc_map_low", &self.dtc_map_low),
+            ("dtc_map_high", &self.dtc_map_high),
+            ("dtc_maf_performance", &self.dtc_maf_performance),
+            ("dtc_maf_low", &self.dtc_maf_low),
+            ("dtc_maf_high", &self.dtc_maf_high),
+            ("dtc_egr_insufficient", &self.dtc_egr_insufficient),
+            ("dtc_egr_excessive", &self.dtc_egr_excessive),
+            ("dtc_leak", &self.dtc_leak),
+            ("dtc_egr_slow_response", &self.dtc_egr_slow_response),
+            ("dtc_group", &self.dtc_group),
+        ])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    type Change = fn(&mut IntakeMonitorConfig);
+
+    #[test]
+    fn defaults_are_valid_and_each_error_names_the_key_written() {
+        let at = KeyPath::file("i.toml").key("monitor");
+        IntakeMonitorConfig::default()
+            .validate(&at)
+            .expect("defaults");
+        let cases: [(Change, &str); 5] = [
+            // A period far below a nanosecond was accepted and rounded up to 1 ns.
+            (
+                |c| c.poll_period_s = 1e-9,
+                "i.toml: [monitor] poll_period_s = 1e-9: must be between 1e-5 and 1 s",
+            ),
+            // Was reported as parameter `beta`.
+            (
+                |c| c.federated_shares = [0.3, 0.3],
+                "i.toml: [monitor] federated_shares = [0.3, 0.3]: the information-sharing factors must sum to 1",
+            ),
+            (
+                |c| c.q_std[2] = f64::NAN,
+                "i.toml: [monitor] q_std[2] = NaN: must be between 0 and 10 kg/s",
+            ),
+            (
+                |c| c.pressure_cusum_min_bias_sigma = 0.0,
+                "i.toml: [monitor] pressure_cusum_min_bias_sigma = 0.0: ",
+            ),
+            (
+                |c| c.nis_window = 0,
+                "i.toml: [monitor] nis_window = 0: must be between 1 and 512 segments",
+            ),
+        ];
+        for (change, want) in cases {
+            let mut c = IntakeMonitorConfig::default();
+            change(&mut c);
+            let e = c.validate(&at).unwrap_err().to_string();
+            assert!(e.starts_with(want), "{e}\nwanted: {want}");
         }
     }
 }

@@ -112,6 +112,7 @@ pub use hypotheses::{
     ALL_FAULTS,
 };
 
+use crate::config_key::KeyPath;
 use crate::monitor::{Monitor, Output, OutputSink};
 use crate::monitor_events::{EventSpec, FreezeValues, MonitorEvents};
 use crate::signal_table::{SignalId, SignalTable};
@@ -127,7 +128,7 @@ const ONSET_MARGIN: u64 = 6;
 /// `ONSET_WINDOW_MAX` records into 16 banks (1.3 s at 6000 rpm, 9.6 s at 800 rpm).
 const ONSET_WINDOW_MAX: u64 = 256;
 /// Capacity of the NIS windows.
-const NIS_RING: usize = 512;
+pub(crate) const NIS_RING: usize = 512;
 /// Segments the throttle must have been choked before its flow residual is used (the MAF lag
 /// and the lagged model flow have settled).
 const CHOKED_SETTLE: u32 = 3;
@@ -218,11 +219,19 @@ impl IntakeDecision {
     }
 }
 
+/// Origin named by the errors of settings given to [`IntakeMonitor::new`] directly (a
+/// configuration file is checked, naming the file, when it is parsed:
+/// [`crate::config::IntakeConfig::parse`]).
+pub const SETTINGS_ORIGIN: &str = "intake monitor settings";
+
 /// Errors building the monitor.
 #[derive(Debug, thiserror::Error)]
 pub enum IntakeMonitorError {
     #[error("intake monitor: signal `{0}` is not in the signal table")]
     MissingSignal(String),
+    /// A setting out of its range ([`IntakeMonitorConfig::validate`]).
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
     #[error("intake monitor: invalid setting `{key}`: {reason}")]
     Setting { key: &'static str, reason: String },
     #[error("intake monitor: {0}")]
@@ -262,10 +271,9 @@ struct OnsetCusum {
 }
 
 impl OnsetCusum {
-    fn new(key: &'static str, delta: f64, h: f64) -> Result<Self, IntakeMonitorError> {
-        if !(delta > 0.0 && h > 0.0 && delta.is_finite() && h.is_finite()) {
-            return Err(setting(key, "min bias and threshold must be positive"));
-        }
+    /// Bias and threshold are checked by [`IntakeMonitorConfig::validate`] (each in its range,
+    /// a finite run length).
+    fn new(delta: f64, h: f64) -> Result<Self, IntakeMonitorError> {
         let arl = two_sided_arl(0.0, delta / 2.0, h);
         Ok(Self {
             cusum: Cusum::new(&CusumConfig {
@@ -638,86 +646,7 @@ impl IntakeMonitor {
             id(&cfg.map_signal)?,
             id(&cfg.maf_signal)?,
         ];
-        for (key, v) in [
-            ("poll_period_s", cfg.poll_period_s),
-            ("map_noise_pa", cfg.map_noise_pa),
-            ("maf_noise_kg_s", cfg.maf_noise_kg_s),
-            ("maf_noise_rel", cfg.maf_noise_rel),
-            ("map_high_ratio", cfg.map_high_ratio),
-            ("maf_high_kg_s", cfg.maf_high_kg_s),
-            ("clip_sigma", cfg.clip_sigma),
-            ("choked_ratio", cfg.choked_ratio),
-            ("flow_ratio_max", cfg.flow_ratio_max),
-            ("nis_cap", cfg.nis_cap),
-            ("nis_threshold", cfg.nis_threshold),
-            ("isolation_min_glr", cfg.isolation_min_glr),
-            ("isolation_max_s", cfg.isolation_max_s),
-            ("adapt_time_s", cfg.adapt_time_s),
-            ("noise_threshold", cfg.noise_threshold),
-            ("noise_cap", cfg.noise_cap),
-            (
-                "noise_max_throttle_rate_deg_s",
-                cfg.noise_max_throttle_rate_deg_s,
-            ),
-            (
-                "noise_max_throttle_rate_change_deg_s",
-                cfg.noise_max_throttle_rate_change_deg_s,
-            ),
-            ("residual_heal_llr", cfg.residual_heal_llr),
-        ] {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err(setting(key, format!("{v} must be a positive number")));
-            }
-        }
-        for (key, v) in [
-            ("map_low_pa", cfg.map_low_pa),
-            ("map_low_margin_pa", cfg.map_low_margin_pa),
-            ("map_high_margin_pa", cfg.map_high_margin_pa),
-            ("maf_low_kg_s", cfg.maf_low_kg_s),
-            ("maf_low_margin_kg_s", cfg.maf_low_margin_kg_s),
-            ("throttle_model_rel", cfg.throttle_model_rel),
-            ("pressure_model_rel", cfg.pressure_model_rel),
-            ("flow_model_rel", cfg.flow_model_rel),
-            ("transient_tolerance_s", cfg.transient_tolerance_s),
-            ("ambient_pressure_std_pa", cfg.ambient_pressure_std_pa),
-            ("adapt_min_s", cfg.adapt_min_s),
-            ("isolation_margin", cfg.isolation_margin),
-            ("isolation_margin_rel", cfg.isolation_margin_rel),
-            ("isolation_min_s", cfg.isolation_min_s),
-            ("group_after_s", cfg.group_after_s),
-            ("group_margin", cfg.group_margin),
-            ("group_margin_rel", cfg.group_margin_rel),
-            ("heal_s", cfg.heal_s),
-            ("episode_quiet_s", cfg.episode_quiet_s),
-        ] {
-            if !(v >= 0.0 && v.is_finite()) {
-                return Err(setting(key, format!("{v} must be a number >= 0")));
-            }
-        }
-        if !(cfg.adapt_limit >= 0.0 && cfg.adapt_limit < 0.5) {
-            return Err(setting("adapt_limit", "must lie in [0, 0.5)"));
-        }
-        if !(cfg.noise_ratio > 1.0 && cfg.noise_ratio.is_finite()) {
-            return Err(setting("noise_ratio", "must be a number > 1"));
-        }
-        if !(cfg.noise_learn_limit >= 1.0 && cfg.noise_learn_limit.is_finite()) {
-            return Err(setting("noise_learn_limit", "must be a number >= 1"));
-        }
-        if cfg.nis_window == 0 || cfg.nis_window > NIS_RING {
-            return Err(setting("nis_window", format!("must be 1..={NIS_RING}")));
-        }
-        if cfg.circuit_persist_segments == 0 {
-            return Err(setting("circuit_persist_segments", "must be at least 1"));
-        }
-        if cfg.frozen_segments < 2 {
-            return Err(setting("frozen_segments", "must be at least 2"));
-        }
-        for (i, v) in cfg.q_std.iter().chain(cfg.p0_std.iter()).enumerate() {
-            let key = if i < 6 { "q_std" } else { "p0_std" };
-            if !(v.is_finite() && *v >= 0.0) {
-                return Err(setting(key, format!("entry {} = {v} must be >= 0", i % 6)));
-            }
-        }
+        cfg.validate(&KeyPath::file(SETTINGS_ORIGIN).key("monitor"))?;
         let model = IntakeModel::new(model.params().clone(), ThrottleFlow::RandomWalk)
             .map_err(|reason| setting("model", reason))?;
         let p = model.params();
@@ -757,17 +686,11 @@ impl IntakeMonitor {
             choked_run: 0,
             flow_run: 0,
             cusum_p: OnsetCusum::new(
-                "pressure_cusum_threshold",
                 cfg.pressure_cusum_min_bias_sigma,
                 cfg.pressure_cusum_threshold,
             )?,
-            cusum_x: OnsetCusum::new(
-                "flow_cusum_threshold",
-                cfg.flow_cusum_min_bias_sigma,
-                cfg.flow_cusum_threshold,
-            )?,
+            cusum_x: OnsetCusum::new(cfg.flow_cusum_min_bias_sigma, cfg.flow_cusum_threshold)?,
             cusum_t: OnsetCusum::new(
-                "throttle_cusum_threshold",
                 cfg.throttle_cusum_min_bias_sigma,
                 cfg.throttle_cusum_threshold,
             )?,

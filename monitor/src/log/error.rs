@@ -70,11 +70,38 @@ pub enum LogError {
     },
     /// The record structure at `offset` is invalid (an impossible length, an unparsable
     /// record outside any chunk); the reader cannot find the next record. Fatal.
+    ///
+    /// A record whose length runs past the end of a file that ends with a valid footer and end
+    /// magic is corruption, not truncation: the file is complete, its record framing is wrong.
     #[error("{}: corrupt at byte {offset}: {detail}", file.display())]
     Corrupt {
         file: PathBuf,
         offset: u64,
         detail: String,
+    },
+    /// Reading the file would cost more than a limit of [`ReadOptions`] allows (too many
+    /// chunk indexes, channels or schemas, a message, record or summary larger than allowed,
+    /// chunks that decompress to more than the budget for the file's size). The summary size
+    /// and the counts are checked before what they bound is allocated, the budget before a
+    /// chunk is decompressed. `limit` names the [`ReadOptions`] field, `value` its setting (in
+    /// the field's unit); a trusted file is read by raising that field. Fatal.
+    ///
+    /// [`ReadOptions`]: crate::log::ReadOptions
+    #[error(
+        "{}: {what}{}: over the reader's limit {limit} = {value}; if the file is trusted, raise it (`[replay.limits] {limit}` in the runtime configuration, ReadOptions::{limit} for a host)",
+        file.display(),
+        at_byte(offset)
+    )]
+    LimitExceeded {
+        file: PathBuf,
+        /// The [`ReadOptions`](crate::log::ReadOptions) field that sets the limit.
+        limit: &'static str,
+        /// The limit's value, in the unit of that field (a count, or bytes, or a ratio).
+        value: u64,
+        /// The byte offset of the record concerned, where there is one.
+        offset: Option<u64>,
+        /// What exceeds the limit, with the amount.
+        what: String,
     },
     /// A CRC does not match. Chunk CRCs are always checked: the reader reports the mismatch,
     /// skips the chunk and continues. The data and summary section CRCs are checked with
@@ -200,6 +227,12 @@ pub enum LogError {
     },
 }
 
+fn at_byte(offset: &Option<u64>) -> String {
+    offset
+        .map(|o| format!(" (at byte {o})"))
+        .unwrap_or_default()
+}
+
 fn write_context(topic: &Option<String>, log_time_ns: &Option<u64>) -> String {
     match (topic, log_time_ns) {
         (Some(t), Some(ns)) => format!(" ({t} at {ns} ns)"),
@@ -219,6 +252,7 @@ impl LogError {
             | LogError::NotMcap { file }
             | LogError::Truncated { file, .. }
             | LogError::Corrupt { file, .. }
+            | LogError::LimitExceeded { file, .. }
             | LogError::CrcMismatch { file, .. }
             | LogError::BadChunk { file, .. }
             | LogError::UnknownChannel { file, .. }
@@ -276,6 +310,7 @@ impl LogError {
             | LogError::MissingField { offset, .. }
             | LogError::NotANumber { offset, .. }
             | LogError::WrongShape { offset, .. } => Some(*offset),
+            LogError::LimitExceeded { offset, .. } => *offset,
             _ => None,
         }
     }
@@ -301,6 +336,7 @@ impl LogError {
             | LogError::NotMcap { .. }
             | LogError::Truncated { .. }
             | LogError::Corrupt { .. }
+            | LogError::LimitExceeded { .. }
             | LogError::Write { .. } => true,
         }
     }

@@ -78,6 +78,15 @@ fn flat_field_f64(json: &[u8], key: &[u8]) -> Option<Result<f64, FieldLookupErro
 
 /// [`json_field_f64`] by serde_json, for any JSON.
 fn general_field_f64(json: &[u8], path: &str) -> Result<f64, FieldLookupError> {
+    // serde_json skips the strings it ignores without checking that they are UTF-8, so a text
+    // with invalid bytes in a string off the path would be read as JSON. Parsing it as a
+    // `Value` checks every string and names the position (found by the `json_field` fuzz
+    // target); text that is UTF-8 (all of fdd's messages) does not pay for it.
+    if !json.is_ascii() && std::str::from_utf8(json).is_err() {
+        if let Err(e) = serde_json::from_slice::<serde_json::Value>(json) {
+            return Err(FieldLookupError::Json(e));
+        }
+    }
     let mut de = serde_json::Deserializer::from_slice(json);
     let found = Lookup { path }
         .deserialize(&mut de)
@@ -481,5 +490,15 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn invalid_utf8_in_a_string_off_the_path_is_invalid_json() {
+        let json = b"{\"a\\\"b\":2,\"x\":[1,{\"\x9a\x9ay\":3}]}";
+        assert!(serde_json::from_slice::<serde_json::Value>(json).is_err());
+        assert!(matches!(
+            json_field_f64(json, "a\"b"),
+            Err(FieldLookupError::Json(_))
+        ));
     }
 }

@@ -12,6 +12,9 @@
 //!   chunk indexes; a file without a usable summary (truncated, unfinished) is read linearly in
 //!   file order after a warning. [`LogMessage::decode`] and [`LogMessage::field_f64`] decode a
 //!   message into a type or extract one numeric field by name.
+//! - [`ReadOptions`] bounds what one file may cost the reader (sizes in bytes, counts of chunk
+//!   indexes, channels and schemas, decompressed bytes relative to the file's size); going over
+//!   a limit is a [`LogError::LimitExceeded`] naming the option to raise.
 //! - [`LogError`] names the file, and where known the topic, log time and byte offset;
 //!   [`LogError::is_fatal`] separates what stops the reading from per-message and per-chunk
 //!   problems that are reported and skipped.

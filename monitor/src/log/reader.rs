@@ -6,33 +6,52 @@
 //!   indexes give each chunk's offset and time range. Chunks are loaded in order of their first
 //!   log time, and a chunk is loaded only when its first log time is not after the next message
 //!   to yield; messages are merged across the loaded chunks by (log time, chunk position in the
-//!   file, position in the chunk). Memory holds only the chunks that overlap in time, which for
-//!   files fdd writes (in time order) is one, or two at a boundary.
+//!   file, position in the chunk), through a binary heap holding each loaded chunk's next
+//!   message (O(log k) per message for k loaded chunks). Memory holds only the chunks that
+//!   overlap in time, which for files fdd writes (in time order) is one, or two at a boundary.
+//!   The chunk indexes are checked when opening: one repeated (same offset and length) is used
+//!   once, with a `tracing` warning; one whose bytes overlap an earlier chunk's or leave the
+//!   data section is refused, and its chunk reported as a [`LogError::BadChunk`] when its turn
+//!   comes. So every byte of the data section is decompressed at most once.
 //! - **Linear** (no usable summary: a truncated file, a writer that did not finish, a file
 //!   without chunk indexes): a `tracing` warning, then the records are read from start to end,
 //!   one chunk at a time, and messages are yielded in **file order**; the caller must check that
 //!   log times do not go backwards. A file cut short ends with a [`LogError::Truncated`] naming
-//!   the byte where the readable data stops, after every complete chunk has been yielded.
+//!   the byte where the readable data stops, after every complete chunk has been yielded. A
+//!   file that ends with a valid footer and end magic is complete: a record running past the
+//!   footer there is a [`LogError::Corrupt`], not a truncation.
 //!
 //! Chunks are decompressed whole and their CRC checked before any of their records is read. A
 //! chunk of the usual kind (zstd or uncompressed, consistent lengths, complete records, right
 //! CRC) is decoded here directly, its messages left in the decompressed chunk; anything else
-//! goes through the mcap crate's sans-io reader, which also names what is wrong. The record
-//! framing, the summary and the footer are parsed here with bounds checks, so a corrupt length
-//! never causes a huge allocation or a panic.
+//! (lz4 chunks, damaged chunks) goes through the mcap crate's sans-io reader, which also names
+//! what is wrong. The record framing, the summary and the footer are parsed here with bounds
+//! checks, so a corrupt length never causes a huge allocation or a panic.
+//!
+//! # Limits
+//!
+//! What one file may cost is bounded by [`ReadOptions`]: record, message and summary sizes
+//! (bytes), numbers of chunk indexes, channels and schemas, and the total decompressed bytes
+//! relative to the file's size. Going over one is a fatal [`LogError::LimitExceeded`] naming
+//! the file, the limit (the [`ReadOptions`] field), its value and how to raise it. Sizes and
+//! counts are checked before what they bound is allocated, the decompression budget before a
+//! chunk is decompressed. The defaults are far above what fdd writes.
 //!
 //! # Errors
 //!
 //! [`LogReader::open_with`] fails on what makes the file unreadable: missing or unreadable file,
-//! bad magic, an empty file and, with [`ReadOptions::validate_crcs`], a data-section or summary
-//! CRC mismatch.
+//! bad magic, an empty file, a summary over a limit and, with [`ReadOptions::validate_crcs`], a
+//! data-section or summary CRC mismatch.
 //! While iterating, a problem with one chunk ([`LogError::BadChunk`], a chunk CRC mismatch) or
 //! one message ([`LogError::UnknownChannel`]) is yielded as an `Err` and reading continues
-//! with the next one; a fatal error ([`LogError::is_fatal`]: truncation, I/O) is the last item.
-//! Decoding a message ([`LogMessage::decode`], [`LogMessage::field_f64`]) reports bad JSON or a
-//! missing field with the file, topic, log time and chunk offset.
+//! with the next one; a fatal error ([`LogError::is_fatal`]: truncation, corruption, a limit,
+//! I/O) is the last item. Failed chunks are counted ([`ReadStats::chunks_failed`]), so that a
+//! file whose chunks all fail ([`ReadStats::all_chunks_failed`]) is not taken for an empty
+//! log. Decoding a message ([`LogMessage::decode`], [`LogMessage::field_f64`]) reports bad JSON
+//! or a missing field with the file, topic, log time and chunk offset.
 
-use std::collections::{BTreeMap, HashSet};
+use std::cmp::Reverse;
+use std::collections::{BTreeMap, BinaryHeap, HashSet};
 use std::fs::File;
 use std::io::{self, BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
@@ -66,14 +85,75 @@ pub struct ReadOptions {
     /// Only yield messages on these topics (all when `None`). Other messages are skipped when
     /// their chunk is loaded, without being copied.
     pub topics: Option<Vec<String>>,
-    /// Largest record (chunk, decompressed chunk, summary) the reader will hold in memory,
-    /// bytes; a larger one is reported as corrupt instead of being allocated.
+    /// Largest record (chunk, decompressed chunk, record outside chunks) the reader will hold
+    /// in memory, bytes; a larger chunk is reported and skipped ([`LogError::BadChunk`]), a
+    /// larger record outside chunks stops the reading ([`LogError::LimitExceeded`]), instead of
+    /// being allocated. Default [`Self::DEFAULT_MAX_RECORD_BYTES`].
     pub max_record_bytes: u64,
+    /// Most chunk index records the summary may hold, a count (each costs about 100 bytes of
+    /// memory while the file is opened, on top of the summary itself, and about 60 after). More fail the open with [`LogError::LimitExceeded`]. Repeated
+    /// indexes of one chunk count here before they are merged. Default
+    /// [`Self::DEFAULT_MAX_CHUNK_INDEXES`].
+    pub max_chunk_indexes: u64,
+    /// Most channels (distinct channel ids, in the summary or the data) the file may define, a
+    /// count. More stop the reading with [`LogError::LimitExceeded`]. Default
+    /// [`Self::DEFAULT_MAX_CHANNELS`].
+    pub max_channels: u64,
+    /// Most schemas (distinct schema ids, in the summary or the data) the file may define, a
+    /// count; each holds its schema text in memory. More stop the reading with
+    /// [`LogError::LimitExceeded`]. Default [`Self::DEFAULT_MAX_SCHEMAS`].
+    pub max_schemas: u64,
+    /// Largest message payload (the message data, without its 22-byte header), bytes. A larger
+    /// one stops the reading with [`LogError::LimitExceeded`]. Default
+    /// [`Self::DEFAULT_MAX_MESSAGE_BYTES`].
+    pub max_message_bytes: u64,
+    /// Largest summary section, bytes: the reader holds it whole while opening the file. A
+    /// larger one fails the open with [`LogError::LimitExceeded`]. Default
+    /// [`Self::DEFAULT_MAX_SUMMARY_BYTES`].
+    pub max_summary_bytes: u64,
+    /// Decompression budget, as a ratio (dimensionless) to the file's size: the chunks read
+    /// may decompress to at most `max_decompression_ratio` times the file's bytes in total
+    /// (counted from each chunk's declared uncompressed size, before it is decompressed), or
+    /// [`decompressed_bytes_floor`](Self::decompressed_bytes_floor) if that is more. A chunk
+    /// that would go over the budget stops the reading with [`LogError::LimitExceeded`]: this
+    /// bounds the work and memory a small, highly compressed ("zip bomb") file can cost.
+    /// Default [`Self::DEFAULT_MAX_DECOMPRESSION_RATIO`].
+    pub max_decompression_ratio: u64,
+    /// The smallest decompression budget, bytes, whatever the file's size, so that small
+    /// files of very compressible messages still read (see
+    /// [`max_decompression_ratio`](Self::max_decompression_ratio)). Default
+    /// [`Self::DEFAULT_DECOMPRESSED_BYTES_FLOOR`].
+    pub decompressed_bytes_floor: u64,
 }
 
 impl ReadOptions {
     /// Default [`ReadOptions::max_record_bytes`]: 256 MiB.
     pub const DEFAULT_MAX_RECORD_BYTES: u64 = 256 << 20;
+    /// Default [`ReadOptions::max_chunk_indexes`]: 1,000,000 (fdd writes one per MiB of
+    /// messages: a terabyte of log).
+    pub const DEFAULT_MAX_CHUNK_INDEXES: u64 = 1_000_000;
+    /// Default [`ReadOptions::max_channels`]: 10,000 (fdd writes about 20).
+    pub const DEFAULT_MAX_CHANNELS: u64 = 10_000;
+    /// Default [`ReadOptions::max_schemas`]: 10,000 (fdd writes about 20).
+    pub const DEFAULT_MAX_SCHEMAS: u64 = 10_000;
+    /// Default [`ReadOptions::max_message_bytes`]: 16 MiB (fdd's JSON messages are under
+    /// 4 KiB).
+    pub const DEFAULT_MAX_MESSAGE_BYTES: u64 = 16 << 20;
+    /// Default [`ReadOptions::max_summary_bytes`]: 128 MiB (fdd's summaries are a few KiB).
+    pub const DEFAULT_MAX_SUMMARY_BYTES: u64 = 128 << 20;
+    /// Default [`ReadOptions::max_decompression_ratio`]: 1000 (zstd level 1 on fdd's JSON
+    /// gives about 10).
+    pub const DEFAULT_MAX_DECOMPRESSION_RATIO: u64 = 1000;
+    /// Default [`ReadOptions::decompressed_bytes_floor`]: 64 MiB.
+    pub const DEFAULT_DECOMPRESSED_BYTES_FLOOR: u64 = 64 << 20;
+
+    /// The decompression budget for a file of `file_bytes` bytes, bytes: the larger of
+    /// `max_decompression_ratio * file_bytes` and `decompressed_bytes_floor`.
+    pub fn decompressed_budget(&self, file_bytes: u64) -> u64 {
+        self.max_decompression_ratio
+            .saturating_mul(file_bytes)
+            .max(self.decompressed_bytes_floor)
+    }
 }
 
 impl Default for ReadOptions {
@@ -82,6 +162,13 @@ impl Default for ReadOptions {
             validate_crcs: false,
             topics: None,
             max_record_bytes: Self::DEFAULT_MAX_RECORD_BYTES,
+            max_chunk_indexes: Self::DEFAULT_MAX_CHUNK_INDEXES,
+            max_channels: Self::DEFAULT_MAX_CHANNELS,
+            max_schemas: Self::DEFAULT_MAX_SCHEMAS,
+            max_message_bytes: Self::DEFAULT_MAX_MESSAGE_BYTES,
+            max_summary_bytes: Self::DEFAULT_MAX_SUMMARY_BYTES,
+            max_decompression_ratio: Self::DEFAULT_MAX_DECOMPRESSION_RATIO,
+            decompressed_bytes_floor: Self::DEFAULT_DECOMPRESSED_BYTES_FLOOR,
         }
     }
 }
@@ -129,16 +216,38 @@ pub struct ChannelInfo {
 /// bounded).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ReadStats {
-    /// Chunks in the file's index (indexed mode); `None` in linear mode.
+    /// Chunks in the file's index (indexed mode), once each: repeated indexes of one chunk
+    /// count once, refused ones (overlapping another chunk, outside the data section) count;
+    /// `None` in linear mode. At the end of an indexed read that no fatal error stopped,
+    /// `chunks_loaded + chunks_failed` equals it.
     pub chunks_total: Option<usize>,
     /// Chunks loaded (read, decompressed and parsed without error) so far.
     pub chunks_loaded: usize,
+    /// Chunks that could not be used so far, each reported by one non-fatal error: a chunk
+    /// CRC mismatch, a chunk that cannot be decompressed or parsed, a chunk index that does not
+    /// point to a chunk or was refused. See [`ReadStats::all_chunks_failed`].
+    pub chunks_failed: usize,
+    /// Indexes of an already indexed chunk (same offset and length) that the summary repeats,
+    /// dropped when opening (a `tracing` warning says how many).
+    pub duplicate_chunk_indexes: usize,
+    /// Decompressed chunk bytes so far (each chunk's declared uncompressed size, counted when
+    /// it is read), bytes; see [`ReadOptions::max_decompression_ratio`].
+    pub decompressed_bytes: u64,
     /// Chunks held in memory right now.
     pub resident_chunks: usize,
     /// The most chunks held in memory at once.
     pub max_resident_chunks: usize,
     /// Messages yielded so far.
     pub messages: u64,
+}
+
+impl ReadStats {
+    /// True when at least one chunk failed and none could be read: a file whose chunks are all
+    /// unreadable (an unsupported compression, damage everywhere) is then not mistaken for an
+    /// empty log. Meaningful once the reading has ended.
+    pub fn all_chunks_failed(&self) -> bool {
+        self.chunks_failed > 0 && self.chunks_loaded == 0
+    }
 }
 
 /// One message, borrowed from the reader (see [`LogReader::next_message`]).
@@ -431,10 +540,36 @@ impl Batch {
 }
 
 enum Step {
+    /// Yield the next message of the chunk in this slot.
     Yield(usize),
     Error(LogError),
     End,
 }
+
+/// Why a chunk index of the summary is not used (its chunk is reported as a
+/// [`LogError::BadChunk`] when its turn comes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Refusal {
+    /// The byte range leaves the data section (which ends at `data_end`).
+    OutsideData { data_end: u64 },
+    /// The byte range overlaps that of the chunk indexed at `other` (kept: the first in file
+    /// order).
+    Overlaps { other: u64, other_end: u64 },
+    /// The end time is before the start time.
+    TimesReversed,
+}
+
+/// A chunk index to load (indexed mode), or to report as refused.
+#[derive(Debug, Clone, Copy)]
+struct PendingChunk {
+    idx: ChunkIdx,
+    refusal: Option<Refusal>,
+}
+
+/// The merge key of a resident chunk's next message: (log time, chunk offset in the file,
+/// position in the chunk, slot). Chunk offsets differ between resident chunks (repeated
+/// indexes are merged when opening), so the slot never decides.
+type HeadKey = (u64, u64, usize, usize);
 
 /// Streams the messages of an MCAP file; see the [module documentation](self).
 ///
@@ -469,10 +604,33 @@ pub struct LogReader {
     schemas: BTreeMap<u16, Arc<SchemaInfo>>,
     statistics: Option<Statistics>,
     /// Indexed mode: chunks in load order, and the next to load.
-    pending: Vec<ChunkIdx>,
+    pending: Vec<PendingChunk>,
     next_pending: usize,
-    resident: Vec<Batch>,
+    /// The loaded chunks (at most one in linear mode), by slot; `None` is a free slot.
+    slots: Vec<Option<Batch>>,
+    free_slots: Vec<usize>,
+    resident_count: usize,
+    /// Indexed mode: the next message of every resident chunk, smallest key first, so that
+    /// choosing the next message costs O(log k) for k resident chunks.
+    heads: BinaryHeap<Reverse<HeadKey>>,
+    /// Indexed mode: the next message of the chunk the last message came from, kept out of
+    /// `heads` until another chunk's message comes first, so that reading one chunk at a time
+    /// (fdd's files) costs no heap operation.
+    current: Option<HeadKey>,
+    /// The slot whose last message was just yielded; freed on the next call, when the
+    /// message's borrow has ended.
+    done_slot: Option<usize>,
+    /// Linear mode: the slot of the chunk being yielded.
+    linear_slot: Option<usize>,
+    /// Empty batches kept for their buffers.
     free: Vec<Batch>,
+    /// Where the footer starts, when the file ends with a footer record and the end magic: a
+    /// record running past it is then corruption, not truncation.
+    footer_pos: Option<u64>,
+    /// [`ReadOptions::decompressed_budget`] for this file, bytes.
+    decompressed_budget: u64,
+    /// Distinct channel ids defined so far.
+    channel_count: usize,
     /// The body of the chunk record being decoded (kept for its capacity).
     chunk_buf: Vec<u8>,
     /// For [`LogReader::decode_chunk_directly`], made on first use.
@@ -520,6 +678,7 @@ impl LogReader {
             return Err(open_err(io::Error::other("is a directory")));
         }
         let file_len = meta.len();
+        let decompressed_budget = options.decompressed_budget(file_len);
         let wanted_topics = options
             .topics
             .as_ref()
@@ -540,8 +699,17 @@ impl LogReader {
             statistics: None,
             pending: Vec::new(),
             next_pending: 0,
-            resident: Vec::new(),
+            slots: Vec::new(),
+            free_slots: Vec::new(),
+            resident_count: 0,
+            heads: BinaryHeap::new(),
+            current: None,
+            done_slot: None,
+            linear_slot: None,
             free: Vec::new(),
+            footer_pos: None,
+            decompressed_budget,
+            channel_count: 0,
             chunk_buf: Vec::new(),
             zstd: None,
             direct_chunks: true,
@@ -579,7 +747,7 @@ impl LogReader {
     /// Counters of the reading so far.
     pub fn stats(&self) -> ReadStats {
         ReadStats {
-            resident_chunks: self.resident.len(),
+            resident_chunks: self.resident_count,
             ..self.stats
         }
     }
@@ -671,6 +839,9 @@ impl LogReader {
         if opcode != op::FOOTER || len != 20 {
             return Ok(Err("no footer record before the end magic".into()));
         }
+        // The file is complete: whatever the summary, a record running past the footer is
+        // corruption (linear mode tells it from truncation by this).
+        self.footer_pos = Some(footer_pos);
         if summary_start == 0 {
             return Ok(Err("the file has no summary section".into()));
         }
@@ -680,12 +851,20 @@ impl LogReader {
             )));
         }
         let summary_len = footer_pos - summary_start;
-        if summary_len > self.options.max_record_bytes {
-            return Ok(Err(format!(
-                "the summary section ({summary_len} bytes) is larger than max_record_bytes"
-            )));
+        if summary_len > self.options.max_summary_bytes {
+            return Err(self.limit(
+                "max_summary_bytes",
+                self.options.max_summary_bytes,
+                Some(summary_start),
+                format!("the summary section is {summary_len} bytes"),
+            ));
         }
-        let mut summary = vec![0u8; summary_len as usize];
+        let Ok(summary_len) = usize::try_from(summary_len) else {
+            return Ok(Err(format!(
+                "the summary section ({summary_len} bytes) does not fit in memory"
+            )));
+        };
+        let mut summary = vec![0u8; summary_len];
         self.read_at(summary_start, &mut summary)?;
         if self.options.validate_crcs && summary_crc != 0 {
             let mut h = Crc32::new();
@@ -703,11 +882,12 @@ impl LogReader {
             }
         }
 
-        // Parse the summary records.
-        let mut chunks = Vec::new();
+        // Parse the summary records. Schemas and channels: the first definition of an id wins
+        // (as in the data section), so repeated records cost nothing.
+        let mut chunks: Vec<ChunkIdx> = Vec::new();
         let mut statistics = None;
-        let mut schemas = Vec::new();
-        let mut channels = Vec::new();
+        let mut schemas: BTreeMap<u16, SchemaInfo> = BTreeMap::new();
+        let mut channels: BTreeMap<u16, (u16, String, String)> = BTreeMap::new();
         let mut rest = &summary[..];
         let mut at = summary_start;
         while !rest.is_empty() {
@@ -726,20 +906,49 @@ impl LogReader {
             let bad = |what: &str| Ok(Err(format!("unreadable {what} record at byte {at}")));
             match opcode {
                 op::SCHEMA => match parse_schema(body) {
-                    Some(s) => schemas.push(s),
+                    Some(s) => {
+                        if s.id != 0 && !schemas.contains_key(&s.id) {
+                            if schemas.len() as u64 >= self.options.max_schemas {
+                                return Err(self.too_many_schemas(Some(at)));
+                            }
+                            schemas.insert(s.id, s);
+                        }
+                    }
                     None => return bad("schema"),
                 },
                 op::CHANNEL => match parse_channel(body) {
-                    Some(ch) => channels.push((
-                        ch.id,
-                        ch.schema_id,
-                        ch.topic.to_string(),
-                        ch.message_encoding.to_string(),
-                    )),
+                    Some(ch) => {
+                        if !channels.contains_key(&ch.id) {
+                            if channels.len() as u64 >= self.options.max_channels {
+                                return Err(self.too_many_channels(Some(at)));
+                            }
+                            channels.insert(
+                                ch.id,
+                                (
+                                    ch.schema_id,
+                                    ch.topic.to_string(),
+                                    ch.message_encoding.to_string(),
+                                ),
+                            );
+                        }
+                    }
                     None => return bad("channel"),
                 },
                 op::CHUNK_INDEX => match parse_chunk_index(body) {
-                    Some(ci) => chunks.push(ci),
+                    Some(ci) => {
+                        if chunks.len() as u64 >= self.options.max_chunk_indexes {
+                            return Err(self.limit(
+                                "max_chunk_indexes",
+                                self.options.max_chunk_indexes,
+                                Some(at),
+                                format!(
+                                    "the summary holds more than {} chunk indexes",
+                                    self.options.max_chunk_indexes
+                                ),
+                            ));
+                        }
+                        chunks.push(ci);
+                    }
                     None => return bad("chunk index"),
                 },
                 op::STATISTICS => match parse_statistics(body) {
@@ -751,22 +960,7 @@ impl LogReader {
             rest = c.b;
             at += RECORD_HEADER + len;
         }
-        let data_end_pos = summary_start - DATA_END_RECORD;
-        for ci in &chunks {
-            let end = ci.offset.checked_add(ci.length);
-            if ci.offset < 8 || ci.length < RECORD_HEADER || end.is_none_or(|e| e > data_end_pos) {
-                return Ok(Err(format!(
-                    "a chunk index points outside the data section (chunk at byte {})",
-                    ci.offset
-                )));
-            }
-            if ci.start_time > ci.end_time {
-                return Ok(Err(format!(
-                    "a chunk index has its end time before its start time (chunk at byte {})",
-                    ci.offset
-                )));
-            }
-        }
+        drop(summary);
         match statistics {
             None if chunks.is_empty() => {
                 return Ok(Err(
@@ -778,6 +972,7 @@ impl LogReader {
             }
             _ => {}
         }
+        let data_end_pos = summary_start - DATA_END_RECORD;
 
         if self.options.validate_crcs {
             let mut rec = [0u8; DATA_END_RECORD as usize];
@@ -802,14 +997,30 @@ impl LogReader {
             }
         }
 
-        for s in schemas {
-            self.add_schema(s);
+        for (_, s) in schemas {
+            self.add_schema(s, None)?;
         }
-        for (id, schema_id, topic, encoding) in channels {
-            self.add_channel(id, schema_id, &topic, &encoding);
+        for (id, (schema_id, topic, encoding)) in channels {
+            self.add_channel(id, schema_id, &topic, &encoding, None)?;
         }
-        chunks.sort_by_key(|c| (c.start_time, c.offset));
-        self.pending = chunks;
+        let (pending, duplicates) = check_chunk_indexes(chunks, data_end_pos);
+        if duplicates > 0 {
+            tracing::warn!(
+                file = %self.path.display(),
+                duplicates,
+                "the summary repeats {duplicates} chunk indexes: each chunk is read once"
+            );
+        }
+        let refused = pending.iter().filter(|p| p.refusal.is_some()).count();
+        if refused > 0 {
+            tracing::warn!(
+                file = %self.path.display(),
+                refused,
+                "{refused} of the summary's chunk indexes overlap another chunk or leave the data section: their chunks are reported and skipped"
+            );
+        }
+        self.stats.duplicate_chunk_indexes = duplicates;
+        self.pending = pending;
         self.statistics = statistics;
         Ok(Ok(()))
     }
@@ -843,9 +1054,14 @@ impl LogReader {
         Ok(())
     }
 
-    fn add_schema(&mut self, s: SchemaInfo) {
+    /// Adds a schema (the first definition of an id wins); more than
+    /// [`ReadOptions::max_schemas`] is an error. `offset`: the record or chunk defining it.
+    fn add_schema(&mut self, s: SchemaInfo, offset: Option<u64>) -> Result<(), LogError> {
         if s.id == 0 || self.schemas.contains_key(&s.id) {
-            return;
+            return Ok(());
+        }
+        if self.schemas.len() as u64 >= self.options.max_schemas {
+            return Err(self.too_many_schemas(offset));
         }
         let s = Arc::new(s);
         for ch in self.channels.iter_mut().flatten() {
@@ -854,28 +1070,98 @@ impl LogReader {
             }
         }
         self.schemas.insert(s.id, s);
+        Ok(())
     }
 
-    fn add_channel(&mut self, id: u16, schema_id: u16, topic: &str, message_encoding: &str) {
+    /// Adds a channel (the first definition of an id wins); more than
+    /// [`ReadOptions::max_channels`] is an error. `offset`: the record or chunk defining it.
+    fn add_channel(
+        &mut self,
+        id: u16,
+        schema_id: u16,
+        topic: &str,
+        message_encoding: &str,
+        offset: Option<u64>,
+    ) -> Result<(), LogError> {
         let i = usize::from(id);
-        if self.channels.len() <= i {
-            self.channels.resize_with(i + 1, || None);
+        if matches!(self.channels.get(i), Some(Some(_))) {
+            return Ok(()); // the first definition of an id wins
         }
-        if self.channels[i].is_some() {
-            return; // the first definition of an id wins
+        if self.channel_count as u64 >= self.options.max_channels {
+            return Err(self.too_many_channels(offset));
+        }
+        if self.channels.len() <= i {
+            // At most 65,536 entries (channel ids are u16).
+            self.channels.resize_with(i + 1, || None);
         }
         let wanted = self
             .wanted_topics
             .as_ref()
             .is_none_or(|t| t.contains(topic));
-        self.channels[i] = Some(ChannelInfo {
-            id,
-            topic: Arc::from(topic),
-            message_encoding: message_encoding.to_string(),
-            schema_id,
-            schema: self.schemas.get(&schema_id).cloned(),
-            wanted,
-        });
+        let schema = self.schemas.get(&schema_id).cloned();
+        if let Some(slot) = self.channels.get_mut(i) {
+            *slot = Some(ChannelInfo {
+                id,
+                topic: Arc::from(topic),
+                message_encoding: message_encoding.to_string(),
+                schema_id,
+                schema,
+                wanted,
+            });
+            self.channel_count += 1;
+        }
+        Ok(())
+    }
+
+    /// A [`LogError::LimitExceeded`] for the [`ReadOptions`] field `limit` set to `value`.
+    fn limit(
+        &self,
+        limit: &'static str,
+        value: u64,
+        offset: Option<u64>,
+        what: String,
+    ) -> LogError {
+        LogError::LimitExceeded {
+            file: self.path.to_path_buf(),
+            limit,
+            value,
+            offset,
+            what,
+        }
+    }
+
+    fn too_many_schemas(&self, offset: Option<u64>) -> LogError {
+        let n = self.options.max_schemas;
+        self.limit(
+            "max_schemas",
+            n,
+            offset,
+            format!("the file defines more than {n} schemas"),
+        )
+    }
+
+    fn too_many_channels(&self, offset: Option<u64>) -> LogError {
+        let n = self.options.max_channels;
+        self.limit(
+            "max_channels",
+            n,
+            offset,
+            format!("the file defines more than {n} channels"),
+        )
+    }
+
+    /// Checks a message payload of `len` bytes against [`ReadOptions::max_message_bytes`].
+    fn check_message_len(&self, len: usize, offset: u64, log_time: u64) -> Result<(), LogError> {
+        let max = self.options.max_message_bytes;
+        if len as u64 > max {
+            return Err(self.limit(
+                "max_message_bytes",
+                max,
+                Some(offset),
+                format!("a message at {log_time} ns is {len} bytes"),
+            ));
+        }
+        Ok(())
     }
 
     fn wants(&self, channel_id: u16) -> bool {
@@ -888,30 +1174,53 @@ impl LogReader {
     /// Reads the chunk record whose 9-byte header (`len` = body length) has just been read at
     /// `rec_pos`, leaving the source after the record, and decodes its messages into a batch.
     fn decode_chunk(&mut self, rec_pos: u64, len: u64) -> Result<Batch, LogError> {
-        if len > self.options.max_record_bytes {
-            let e = self.bad_chunk(
-                rec_pos,
-                format!("the chunk record is {len} bytes, more than max_record_bytes"),
-            );
-            self.src
-                .skip(len)
-                .map_err(|io| self.err_io(rec_pos + RECORD_HEADER, io))?;
-            return Err(e);
-        }
-        let limit = usize::try_from(self.options.max_record_bytes).unwrap_or(usize::MAX);
+        let max = self.options.max_record_bytes;
+        let n = match usize::try_from(len) {
+            Ok(n) if len <= max => n,
+            _ => {
+                let e = self.bad_chunk(
+                    rec_pos,
+                    format!(
+                        "the chunk record is {len} bytes, more than ReadOptions::max_record_bytes = {max} (raise it if the file is trusted)"
+                    ),
+                );
+                self.src
+                    .skip(len)
+                    .map_err(|io| self.err_io(rec_pos + RECORD_HEADER, io))?;
+                return Err(e);
+            }
+        };
+        let limit = usize::try_from(max).unwrap_or(usize::MAX);
         let mut body = std::mem::take(&mut self.chunk_buf);
-        let n = len as usize;
         if body.len() < n {
             body.resize(n, 0);
         }
         let at = self.src.pos;
-        let read = self.src.read_exact(&mut body[..n]);
-        let direct = match read {
-            Ok(()) if self.direct_chunks => self.decode_chunk_directly(rec_pos, &body[..n], limit),
-            Ok(()) => None,
+        if let Err(e) = self.src.read_exact(&mut body[..n]) {
+            self.chunk_buf = body;
+            return Err(self.err_io(at, e));
+        }
+        // The decompression budget, from the chunk's declared uncompressed size (bytes 16..24
+        // of the body), before anything is decompressed. Neither decoding path decompresses
+        // more than the declared size.
+        if let Some(declared) = body.get(16..24).and_then(|b| Cur::new(b).u64()) {
+            let total = self.stats.decompressed_bytes.saturating_add(declared);
+            if total > self.decompressed_budget {
+                self.chunk_buf = body;
+                return Err(self.over_decompression_budget(rec_pos, total));
+            }
+            self.stats.decompressed_bytes = total;
+        }
+        let direct = if self.direct_chunks {
+            self.decode_chunk_directly(rec_pos, &body[..n], limit)
+        } else {
+            Ok(None)
+        };
+        let direct = match direct {
+            Ok(d) => d,
             Err(e) => {
                 self.chunk_buf = body;
-                return Err(self.err_io(at, e));
+                return Err(e);
             }
         };
         if let Some(batch) = direct {
@@ -997,26 +1306,43 @@ impl LogReader {
                         if !self.wants(h.channel_id) {
                             continue;
                         }
+                        let payload = data.get(MESSAGE_HEADER..).unwrap_or_default();
+                        if let Err(e) = self.check_message_len(payload.len(), rec_pos, h.log_time) {
+                            self.recycle(batch);
+                            return Err(e);
+                        }
                         sorted &= h.log_time >= last_time;
                         last_time = h.log_time;
-                        batch.push(h, data.get(MESSAGE_HEADER..).unwrap_or_default());
+                        batch.push(h, payload);
                     }
-                    op::SCHEMA => match parse_schema(data) {
-                        Some(s) => self.add_schema(s),
-                        None => {
+                    op::SCHEMA => {
+                        let added = match parse_schema(data) {
+                            Some(s) => self.add_schema(s, Some(rec_pos)),
+                            None => Err(self.bad_chunk(rec_pos, "unreadable schema record".into())),
+                        };
+                        if let Err(e) = added {
                             self.recycle(batch);
-                            return Err(self.bad_chunk(rec_pos, "unreadable schema record".into()));
+                            return Err(e);
                         }
-                    },
-                    op::CHANNEL => match parse_channel(data) {
-                        Some(ch) => {
-                            self.add_channel(ch.id, ch.schema_id, ch.topic, ch.message_encoding)
-                        }
-                        None => {
+                    }
+                    op::CHANNEL => {
+                        let added = match parse_channel(data) {
+                            Some(ch) => self.add_channel(
+                                ch.id,
+                                ch.schema_id,
+                                ch.topic,
+                                ch.message_encoding,
+                                Some(rec_pos),
+                            ),
+                            None => {
+                                Err(self.bad_chunk(rec_pos, "unreadable channel record".into()))
+                            }
+                        };
+                        if let Err(e) = added {
                             self.recycle(batch);
-                            return Err(self.bad_chunk(rec_pos, "unreadable channel record".into()));
+                            return Err(e);
                         }
-                    },
+                    }
                     _ => {}
                 },
             }
@@ -1033,18 +1359,30 @@ impl LogReader {
     /// its records complete and within `limit`, its CRC right (when it has one). `None` for
     /// anything else, and the general path then decodes the chunk: the same messages, schemas
     /// and channels when the chunk is good, and the errors it always reported when it is not.
-    /// Message data stays in the decompressed chunk (no copy).
-    fn decode_chunk_directly(&mut self, rec_pos: u64, body: &[u8], limit: usize) -> Option<Batch> {
+    /// Message data stays in the decompressed chunk (no copy). `Err` for a limit of
+    /// [`ReadOptions`] exceeded, as the general path reports it.
+    fn decode_chunk_directly(
+        &mut self,
+        rec_pos: u64,
+        body: &[u8],
+        limit: usize,
+    ) -> Result<Option<Batch>, LogError> {
         let mut c = Cur::new(body);
-        let _start_time = c.u64()?;
-        let _end_time = c.u64()?;
-        let uncompressed_size = usize::try_from(c.u64()?).ok()?;
-        let crc = c.u32()?;
-        let compression = c.string()?;
-        let compressed_size = c.u64()?;
+        let header = (|| {
+            let _start_time = c.u64()?;
+            let _end_time = c.u64()?;
+            let uncompressed_size = usize::try_from(c.u64()?).ok()?;
+            let crc = c.u32()?;
+            let compression = c.string()?;
+            let compressed_size = c.u64()?;
+            Some((uncompressed_size, crc, compression, compressed_size))
+        })();
+        let Some((uncompressed_size, crc, compression, compressed_size)) = header else {
+            return Ok(None);
+        };
         let records = c.b;
         if records.len() as u64 != compressed_size || uncompressed_size > limit {
-            return None;
+            return Ok(None);
         }
         let mut batch = self.free.pop().unwrap_or_default();
         batch.reset(rec_pos);
@@ -1069,12 +1407,13 @@ impl LogReader {
         };
         if !decoded || (crc != 0 && crc32fast::hash(&batch.arena) != crc) {
             self.recycle(batch);
-            return None;
+            return Ok(None);
         }
         let mut sorted = true;
         let mut last_time = 0u64;
         let mut i = 0;
         let arena = std::mem::take(&mut batch.arena);
+        let mut over_limit = None;
         let complete = loop {
             let Some(header) = arena.get(i..i + RECORD_HEADER as usize) else {
                 break i == arena.len();
@@ -1103,6 +1442,11 @@ impl LogReader {
                     if !self.wants(h.channel_id) {
                         continue;
                     }
+                    let payload_len = rlen - MESSAGE_HEADER;
+                    if let Err(e) = self.check_message_len(payload_len, rec_pos, h.log_time) {
+                        over_limit = Some(e);
+                        break false;
+                    }
                     sorted &= h.log_time >= last_time;
                     last_time = h.log_time;
                     batch.entries.push(Entry {
@@ -1111,16 +1455,31 @@ impl LogReader {
                         sequence: h.sequence,
                         channel_id: h.channel_id,
                         start: start + MESSAGE_HEADER,
-                        len: rlen - MESSAGE_HEADER,
+                        len: payload_len,
                     });
                 }
                 op::SCHEMA => match parse_schema(data) {
-                    Some(s) => self.add_schema(s),
+                    Some(s) => {
+                        if let Err(e) = self.add_schema(s, Some(rec_pos)) {
+                            over_limit = Some(e);
+                            break false;
+                        }
+                    }
                     None => break false,
                 },
                 op::CHANNEL => match parse_channel(data) {
                     Some(ch) => {
-                        self.add_channel(ch.id, ch.schema_id, ch.topic, ch.message_encoding)
+                        let added = self.add_channel(
+                            ch.id,
+                            ch.schema_id,
+                            ch.topic,
+                            ch.message_encoding,
+                            Some(rec_pos),
+                        );
+                        if let Err(e) = added {
+                            over_limit = Some(e);
+                            break false;
+                        }
                     }
                     None => break false,
                 },
@@ -1128,14 +1487,44 @@ impl LogReader {
             }
         };
         batch.arena = arena;
+        if let Some(e) = over_limit {
+            self.recycle(batch);
+            return Err(e);
+        }
         if !complete {
             self.recycle(batch);
-            return None;
+            return Ok(None);
         }
         if self.mode == ReadMode::Indexed && !sorted {
             batch.entries.sort_by_key(|e| e.log_time);
         }
-        Some(batch)
+        Ok(Some(batch))
+    }
+
+    /// The error for a chunk that would take the decompressed bytes to `total`, over the
+    /// budget: it names the option that sets the budget for this file.
+    fn over_decompression_budget(&self, rec_pos: u64, total: u64) -> LogError {
+        let o = &self.options;
+        let by_ratio = o.max_decompression_ratio.saturating_mul(self.file_len);
+        let what = format!(
+            "the chunks read so far decompress to {total} bytes, more than the budget of {} bytes for this {}-byte file (the larger of ReadOptions::max_decompression_ratio = {} times the file size and ReadOptions::decompressed_bytes_floor = {} bytes)",
+            self.decompressed_budget, self.file_len, o.max_decompression_ratio, o.decompressed_bytes_floor
+        );
+        if by_ratio >= o.decompressed_bytes_floor {
+            self.limit(
+                "max_decompression_ratio",
+                o.max_decompression_ratio,
+                Some(rec_pos),
+                what,
+            )
+        } else {
+            self.limit(
+                "decompressed_bytes_floor",
+                o.decompressed_bytes_floor,
+                Some(rec_pos),
+                what,
+            )
+        }
     }
 
     fn bad_chunk(&self, offset: u64, detail: String) -> LogError {
@@ -1152,34 +1541,65 @@ impl LogReader {
         }
     }
 
+    /// Puts a loaded batch in a free slot (and, in indexed mode, its first message in the
+    /// merge heap). `None` for an empty batch, which is recycled.
     fn make_resident(&mut self, batch: Batch) -> Option<usize> {
-        if batch.entries.is_empty() {
+        let Some(first) = batch.entries.first() else {
             self.recycle(batch);
             return None;
+        };
+        let key_head = (first.log_time, batch.offset);
+        let slot = match self.free_slots.pop() {
+            Some(slot) => slot,
+            None => {
+                self.slots.push(None);
+                self.slots.len() - 1
+            }
+        };
+        if let Some(s) = self.slots.get_mut(slot) {
+            *s = Some(batch);
         }
-        self.resident.push(batch);
-        self.stats.max_resident_chunks = self.stats.max_resident_chunks.max(self.resident.len());
-        Some(self.resident.len() - 1)
+        if self.mode == ReadMode::Indexed {
+            self.heads.push(Reverse((key_head.0, key_head.1, 0, slot)));
+        }
+        self.resident_count += 1;
+        self.stats.max_resident_chunks = self.stats.max_resident_chunks.max(self.resident_count);
+        Some(slot)
     }
 
+    /// Frees the slot whose last message was yielded by the previous call.
+    fn free_done_slot(&mut self) {
+        let Some(slot) = self.done_slot.take() else {
+            return;
+        };
+        if let Some(batch) = self.slots.get_mut(slot).and_then(Option::take) {
+            self.recycle(batch);
+            self.free_slots.push(slot);
+            self.resident_count -= 1;
+        }
+        if self.linear_slot == Some(slot) {
+            self.linear_slot = None;
+        }
+    }
+
+    /// Indexed mode: loads the chunks whose first log time is not after the next message to
+    /// yield, then picks that message: the current chunk's next one unless the merge heap's
+    /// smallest comes first (O(1) while one chunk is read, O(log k) for k resident chunks).
     fn indexed_step(&mut self) -> Step {
         loop {
-            let mut head: Option<(usize, u64, u64)> = None;
-            for (i, b) in self.resident.iter().enumerate() {
-                if let Some(e) = b.entries.get(b.pos) {
-                    let better = match head {
-                        None => true,
-                        Some((_, t, o)) => (e.log_time, b.offset) < (t, o),
-                    };
-                    if better {
-                        head = Some((i, e.log_time, b.offset));
-                    }
-                }
-            }
-            if let Some(ci) = self.pending.get(self.next_pending).copied() {
-                if head.is_none_or(|(_, t, _)| ci.start_time <= t) {
+            let head_time = match (self.current, self.heads.peek()) {
+                (Some(c), Some(Reverse(h))) => Some(c.0.min(h.0)),
+                (Some(c), None) => Some(c.0),
+                (None, Some(Reverse(h))) => Some(h.0),
+                (None, None) => None,
+            };
+            if let Some(p) = self.pending.get(self.next_pending).copied() {
+                if head_time.is_none_or(|t| p.idx.start_time <= t) {
                     self.next_pending += 1;
-                    match self.load_indexed_chunk(ci) {
+                    if let Some(refusal) = p.refusal {
+                        return Step::Error(self.refused_chunk(p.idx, refusal));
+                    }
+                    match self.load_indexed_chunk(p.idx) {
                         Ok(batch) => {
                             self.make_resident(batch);
                             continue;
@@ -1188,11 +1608,42 @@ impl LogReader {
                     }
                 }
             }
-            return match head {
-                Some((i, _, _)) => Step::Yield(i),
-                None => Step::End,
+            let current = self.current.take();
+            return match (current, self.heads.peek()) {
+                (Some(c), Some(Reverse(h))) if *h < c => {
+                    let slot = h.3;
+                    self.heads.pop();
+                    self.heads.push(Reverse(c));
+                    Step::Yield(slot)
+                }
+                (Some(c), _) => Step::Yield(c.3),
+                (None, Some(&Reverse(h))) => {
+                    self.heads.pop();
+                    Step::Yield(h.3)
+                }
+                (None, None) => Step::End,
             };
         }
+    }
+
+    /// The error reporting a chunk index refused when opening.
+    fn refused_chunk(&self, ci: ChunkIdx, refusal: Refusal) -> LogError {
+        let end = ci.offset.saturating_add(ci.length);
+        let detail = match refusal {
+            Refusal::OutsideData { data_end } => format!(
+                "the summary's chunk index gives bytes {}..{end}, outside the data section (bytes 8..{data_end}); the chunk is skipped",
+                ci.offset
+            ),
+            Refusal::Overlaps { other, other_end } => format!(
+                "the summary's chunk index gives bytes {}..{end}, which overlap the chunk indexed at bytes {other}..{other_end}; the chunk is skipped",
+                ci.offset
+            ),
+            Refusal::TimesReversed => format!(
+                "the summary's chunk index has its end time {} ns before its start time {} ns; the chunk is skipped",
+                ci.end_time, ci.start_time
+            ),
+        };
+        self.bad_chunk(ci.offset, detail)
     }
 
     fn load_indexed_chunk(&mut self, ci: ChunkIdx) -> Result<Batch, LogError> {
@@ -1212,14 +1663,17 @@ impl LogReader {
     }
 
     fn linear_step(&mut self) -> Step {
-        if let Some(i) = self.resident.iter().position(|b| !b.exhausted()) {
-            return Step::Yield(i);
+        if let Some(slot) = self.linear_slot {
+            if matches!(self.slots.get(slot), Some(Some(b)) if !b.exhausted()) {
+                return Step::Yield(slot);
+            }
         }
         loop {
             match self.linear_next_record() {
                 Ok(Some(batch)) => {
-                    if let Some(i) = self.make_resident(batch) {
-                        return Step::Yield(i);
+                    if let Some(slot) = self.make_resident(batch) {
+                        self.linear_slot = Some(slot);
+                        return Step::Yield(slot);
                     }
                 }
                 Ok(None) => return Step::End,
@@ -1228,11 +1682,24 @@ impl LogReader {
         }
     }
 
+    /// The error for records that stop short of where they should, at `offset`: truncation
+    /// ([`LogError::Truncated`]) when the file does not end with a footer and the end magic,
+    /// corruption ([`LogError::Corrupt`]) when it does (the file is complete, so its record
+    /// lengths are wrong).
     fn truncated(&self, offset: u64, detail: String) -> LogError {
-        LogError::Truncated {
-            file: self.path.to_path_buf(),
-            offset,
-            detail,
+        match self.footer_pos {
+            Some(footer) => LogError::Corrupt {
+                file: self.path.to_path_buf(),
+                offset,
+                detail: format!(
+                    "{detail}; the file ends with a valid footer (at byte {footer}) and end magic, so it is complete and its records are damaged"
+                ),
+            },
+            None => LogError::Truncated {
+                file: self.path.to_path_buf(),
+                offset,
+                detail,
+            },
         }
     }
 
@@ -1269,6 +1736,16 @@ impl LogReader {
                 header[1], header[2], header[3], header[4], header[5], header[6], header[7],
                 header[8],
             ]);
+            let end = rec_pos.saturating_add(RECORD_HEADER).saturating_add(len);
+            if let Some(footer) = self.footer_pos.filter(|&f| rec_pos < f && end > f) {
+                return Err(LogError::Corrupt {
+                    file: self.path.to_path_buf(),
+                    offset: rec_pos,
+                    detail: format!(
+                        "the record here (opcode {opcode:#04x}, {len} bytes) runs past the footer at byte {footer}; the file ends with a valid footer and end magic, so it is complete and this record's length is damaged"
+                    ),
+                });
+            }
             if len > left - RECORD_HEADER {
                 return Err(self.truncated(
                     rec_pos,
@@ -1280,16 +1757,19 @@ impl LogReader {
             }
             let body_pos = rec_pos + RECORD_HEADER;
             let small_record = |this: &mut Self| -> Result<Vec<u8>, LogError> {
-                if len > this.options.max_record_bytes {
-                    return Err(LogError::Corrupt {
-                        file: this.path.to_path_buf(),
-                        offset: rec_pos,
-                        detail: format!(
-                            "record (opcode {opcode:#04x}) of {len} bytes, more than max_record_bytes"
-                        ),
-                    });
-                }
-                let mut body = vec![0u8; len as usize];
+                let max = this.options.max_record_bytes;
+                let n = match usize::try_from(len) {
+                    Ok(n) if len <= max => n,
+                    _ => {
+                        return Err(this.limit(
+                            "max_record_bytes",
+                            max,
+                            Some(rec_pos),
+                            format!("a record (opcode {opcode:#04x}) is {len} bytes"),
+                        ))
+                    }
+                };
+                let mut body = vec![0u8; n];
                 this.src
                     .read_exact(&mut body)
                     .map_err(|e| this.err_io(body_pos, e))?;
@@ -1311,14 +1791,25 @@ impl LogReader {
                     let mut batch = self.free.pop().unwrap_or_default();
                     batch.reset(rec_pos);
                     if self.wants(h.channel_id) {
-                        batch.push(h, body.get(MESSAGE_HEADER..).unwrap_or_default());
+                        let payload = body.get(MESSAGE_HEADER..).unwrap_or_default();
+                        if let Err(e) = self.check_message_len(payload.len(), rec_pos, h.log_time) {
+                            self.recycle(batch);
+                            return Err(e);
+                        }
+                        batch.push(h, payload);
                     }
                     return Ok(Some(batch));
                 }
                 op::SCHEMA | op::CHANNEL if !self.seen_data_end => {
                     let body = small_record(self)?;
                     let ok = if opcode == op::SCHEMA {
-                        parse_schema(&body).map(|s| self.add_schema(s)).is_some()
+                        match parse_schema(&body) {
+                            Some(s) => {
+                                self.add_schema(s, Some(rec_pos))?;
+                                true
+                            }
+                            None => false,
+                        }
                     } else {
                         match parse_channel(&body) {
                             Some(ch) => {
@@ -1327,7 +1818,8 @@ impl LogReader {
                                     ch.schema_id,
                                     ch.topic,
                                     ch.message_encoding,
-                                );
+                                    Some(rec_pos),
+                                )?;
                                 true
                             }
                             None => false,
@@ -1418,21 +1910,13 @@ impl LogReader {
         if self.finished {
             return None;
         }
-        // The previous message's borrow has ended: free the chunks that are done.
-        let mut i = 0;
-        while i < self.resident.len() {
-            if self.resident[i].exhausted() {
-                let b = self.resident.swap_remove(i);
-                self.recycle(b);
-            } else {
-                i += 1;
-            }
-        }
+        // The previous message's borrow has ended: free the chunk it exhausted.
+        self.free_done_slot();
         let step = match self.mode {
             ReadMode::Indexed => self.indexed_step(),
             ReadMode::Linear => self.linear_step(),
         };
-        let i = match step {
+        let slot = match step {
             Step::End => {
                 self.finished = true;
                 return None;
@@ -1440,18 +1924,38 @@ impl LogReader {
             Step::Error(e) => {
                 if e.is_fatal() {
                     self.finished = true;
+                } else if matches!(
+                    e,
+                    LogError::BadChunk { .. }
+                        | LogError::CrcMismatch {
+                            section: CrcSection::Chunk,
+                            ..
+                        }
+                ) {
+                    // The non-fatal errors of a step are about a whole chunk.
+                    self.stats.chunks_failed += 1;
                 }
                 return Some(Err(e));
             }
-            Step::Yield(i) => i,
+            Step::Yield(slot) => slot,
         };
-        let Some(batch) = self.resident.get_mut(i) else {
+        let Some(Some(batch)) = self.slots.get_mut(slot) else {
             self.finished = true;
             return None;
         };
-        let &e = batch.entries.get(batch.pos)?;
+        let Some(&e) = batch.entries.get(batch.pos) else {
+            self.finished = true;
+            return None;
+        };
         batch.pos += 1;
         let offset = batch.offset;
+        match batch.entries.get(batch.pos) {
+            Some(next) if self.mode == ReadMode::Indexed => {
+                self.current = Some((next.log_time, offset, batch.pos, slot));
+            }
+            Some(_) => {}
+            None => self.done_slot = Some(slot),
+        }
         let Some(Some(channel)) = self.channels.get(usize::from(e.channel_id)) else {
             return Some(Err(LogError::UnknownChannel {
                 file: self.path.to_path_buf(),
@@ -1461,11 +1965,11 @@ impl LogReader {
             }));
         };
         self.stats.messages += 1;
-        let data = self
-            .resident
-            .get(i)
-            .and_then(|b| b.arena.get(e.start..e.start + e.len))
-            .unwrap_or(&[]);
+        let data = match self.slots.get(slot) {
+            Some(Some(b)) => b.arena.get(e.start..e.start.saturating_add(e.len)),
+            _ => None,
+        }
+        .unwrap_or(&[]);
         Some(Ok(LogMessage {
             topic: &channel.topic,
             log_time_ns: e.log_time,
@@ -1486,6 +1990,56 @@ impl Iterator for LogReader {
     fn next(&mut self) -> Option<Self::Item> {
         self.next_message().map(|r| r.map(|m| m.to_owned_message()))
     }
+}
+
+/// Checks the summary's chunk indexes against each other and the data section, which ends at
+/// `data_end` (the DataEnd record). Returns them in load order (first log time, then file
+/// position) and how many repeated an earlier index of the same chunk.
+///
+/// - An index repeating an earlier one (same offset and length) is dropped: a summary listing
+///   one chunk thousands of times would otherwise load, decompress and yield that chunk as many
+///   times.
+/// - An index whose bytes leave the data section, or overlap those of a chunk indexed before it
+///   in file order (the first one is kept), or whose end time is before its start time, is
+///   refused: its chunk is reported as a [`LogError::BadChunk`] when its turn comes. Chunks
+///   then never overlap, so their number is bounded by the file's size and each byte of the
+///   data section is decompressed at most once.
+///
+/// O(n log n) for n indexes.
+fn check_chunk_indexes(mut chunks: Vec<ChunkIdx>, data_end: u64) -> (Vec<PendingChunk>, usize) {
+    // Stable: among equal (offset, length) the summary's order is kept, so the first of
+    // repeated indexes is the one used.
+    chunks.sort_by_key(|c| (c.offset, c.length));
+    let mut out: Vec<PendingChunk> = Vec::with_capacity(chunks.len());
+    let mut duplicates = 0;
+    let mut last: Option<(u64, u64)> = None; // (offset, length) of the previous index
+    let mut kept_range: Option<(u64, u64)> = None; // [start, end) of the last chunk kept
+    for idx in chunks {
+        if last == Some((idx.offset, idx.length)) {
+            duplicates += 1;
+            continue;
+        }
+        last = Some((idx.offset, idx.length));
+        let end = idx.offset.checked_add(idx.length);
+        let refusal = match end {
+            Some(end) if idx.offset >= 8 && idx.length >= RECORD_HEADER && end <= data_end => {
+                match kept_range {
+                    Some((other, other_end)) if idx.offset < other_end => {
+                        Some(Refusal::Overlaps { other, other_end })
+                    }
+                    _ if idx.start_time > idx.end_time => Some(Refusal::TimesReversed),
+                    _ => {
+                        kept_range = Some((idx.offset, end));
+                        None
+                    }
+                }
+            }
+            _ => Some(Refusal::OutsideData { data_end }),
+        };
+        out.push(PendingChunk { idx, refusal });
+    }
+    out.sort_by_key(|p| (p.idx.start_time, p.idx.offset));
+    (out, duplicates)
 }
 
 /// The streaming decoder the mcap crate uses refuses a zstd frame whose window exceeds its

@@ -16,6 +16,7 @@ use fdd_diagnostics::dtc::{
 use serde::Deserialize;
 
 use crate::config::ConfigError;
+use crate::config_key::{parse_toml, KeyPath};
 
 /// The default runtime configuration compiled into the binary.
 pub const DEFAULT_RUNTIME_TOML: &str = include_str!("../../../config/fdd.toml");
@@ -116,12 +117,77 @@ pub struct ReplayConfig {
     /// A forward jump of the log time larger than this ends the operation cycle, s (> 0).
     #[serde(default = "default_max_gap_s")]
     pub max_gap_s: f64,
+    /// `[replay.limits]`: the log reader's budget for one file; a key left out keeps the
+    /// reader's default.
+    #[serde(default)]
+    pub limits: ReadLimits,
 }
 
 impl Default for ReplayConfig {
     fn default() -> Self {
         ReplayConfig {
             max_gap_s: default_max_gap_s(),
+            limits: ReadLimits::default(),
+        }
+    }
+}
+
+/// `[replay.limits]`: what one log may cost the reader, by the names of the
+/// [`ReadOptions`](crate::log::ReadOptions) fields they set (see there for units and defaults).
+/// A trusted file beyond a default is read by raising the key its error names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReadLimits {
+    /// Largest record or decompressed chunk held in memory, bytes.
+    pub max_record_bytes: Option<u64>,
+    /// Chunk indexes in the summary.
+    pub max_chunk_indexes: Option<u64>,
+    /// Distinct channel ids.
+    pub max_channels: Option<u64>,
+    /// Distinct schema ids.
+    pub max_schemas: Option<u64>,
+    /// One message's payload, bytes.
+    pub max_message_bytes: Option<u64>,
+    /// The summary section, bytes.
+    pub max_summary_bytes: Option<u64>,
+    /// Bytes decompressed in all, as a multiple of the file size.
+    pub max_decompression_ratio: Option<u64>,
+    /// Bytes decompressed in all, at least (for small files), bytes.
+    pub decompressed_bytes_floor: Option<u64>,
+}
+
+impl ReadLimits {
+    /// The keys with their values, in file order.
+    fn entries(&self) -> [(&'static str, Option<u64>); 8] {
+        [
+            ("max_record_bytes", self.max_record_bytes),
+            ("max_chunk_indexes", self.max_chunk_indexes),
+            ("max_channels", self.max_channels),
+            ("max_schemas", self.max_schemas),
+            ("max_message_bytes", self.max_message_bytes),
+            ("max_summary_bytes", self.max_summary_bytes),
+            ("max_decompression_ratio", self.max_decompression_ratio),
+            ("decompressed_bytes_floor", self.decompressed_bytes_floor),
+        ]
+    }
+
+    /// The reader's options: its defaults with the keys given here replaced.
+    pub fn read_options(&self) -> crate::log::ReadOptions {
+        let d = crate::log::ReadOptions::default();
+        crate::log::ReadOptions {
+            max_record_bytes: self.max_record_bytes.unwrap_or(d.max_record_bytes),
+            max_chunk_indexes: self.max_chunk_indexes.unwrap_or(d.max_chunk_indexes),
+            max_channels: self.max_channels.unwrap_or(d.max_channels),
+            max_schemas: self.max_schemas.unwrap_or(d.max_schemas),
+            max_message_bytes: self.max_message_bytes.unwrap_or(d.max_message_bytes),
+            max_summary_bytes: self.max_summary_bytes.unwrap_or(d.max_summary_bytes),
+            max_decompression_ratio: self
+                .max_decompression_ratio
+                .unwrap_or(d.max_decompression_ratio),
+            decompressed_bytes_floor: self
+                .decompressed_bytes_floor
+                .unwrap_or(d.decompressed_bytes_floor),
+            ..d
         }
     }
 }
@@ -224,11 +290,20 @@ pub struct RuntimeConfig {
     pub origin: String,
 }
 
-fn invalid(origin: &str, key: &str, value: impl std::fmt::Display, reason: &str) -> ConfigError {
-    ConfigError::Invalid {
-        origin: origin.to_string(),
-        message: format!("invalid `{key}` = {value}: {reason}"),
-    }
+/// Admissible ranges of the runtime configuration's values.
+pub mod ranges {
+    use crate::config_key::Range;
+
+    /// `signals[i].max_age_s`: from 100 us (a tenth of a 1 kHz sample period) to an hour.
+    pub const MAX_AGE_S: Range = Range::closed(1e-4, 3600.0, "s");
+    /// `[staleness] check_period_s`: from 10 us (a replay of a minute is then 6e6 checks; a
+    /// period of a nanosecond made a replay run forever) to 10 s.
+    pub const CHECK_PERIOD_S: Range = Range::closed(1e-5, 10.0, "s");
+    /// `[replay] max_gap_s`: above the slowest sample spacing (an intake segment at cranking
+    /// speed, 0.1 s) and at most a day.
+    pub const MAX_GAP_S: Range = Range::closed(0.1, 86_400.0, "s");
+    /// Debounce times of `[staleness] debounce` (time-based).
+    pub const DEBOUNCE_TIME_S: Range = Range::closed(0.0, 3600.0, "s");
 }
 
 /// Seconds to nanoseconds, rounded, at least 1.
@@ -239,10 +314,7 @@ pub fn s_to_ns(s: f64) -> u64 {
 impl RuntimeConfig {
     /// Parses and validates a TOML text; `origin` names the source in errors.
     pub fn parse(text: &str, origin: &str) -> Result<Self, ConfigError> {
-        let mut cfg: RuntimeConfig = toml::from_str(text).map_err(|e| ConfigError::Invalid {
-            origin: origin.to_string(),
-            message: e.to_string().trim_end().to_string(),
-        })?;
+        let mut cfg: RuntimeConfig = parse_toml(text, origin)?;
         cfg.origin = origin.to_string();
         cfg.validate()?;
         Ok(cfg)
@@ -277,93 +349,85 @@ impl RuntimeConfig {
         Ok(cfg)
     }
 
-    /// Checks every value; errors name the key (`signals[1].max_age_s`).
+    /// Checks every value against its range ([`ranges`]); errors name the file and the key
+    /// (`signals[1].max_age_s`, `[staleness] check_period_s`).
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let o = &self.origin;
+        let root = KeyPath::file(&self.origin);
+        let signals = root.key("signals");
         if self.signals.is_empty() {
-            return Err(invalid(o, "signals", "[]", "at least one signal is needed"));
+            return Err(signals.invalid("[]", "at least one signal is needed"));
         }
         for (i, s) in self.signals.iter().enumerate() {
-            let key = |k: &str| format!("signals[{i}].{k}");
-            for (k, v) in [("name", &s.name), ("topic", &s.topic), ("field", &s.field)] {
-                if v.trim().is_empty() {
-                    return Err(invalid(o, &key(k), format!("{v:?}"), "must not be empty"));
-                }
-            }
+            let at = signals.index(i);
+            at.key("name").check_name(&s.name)?;
+            at.key("topic").check_name(&s.topic)?;
+            at.key("field").check_name(&s.field)?;
             if let Some(j) = self.signals[..i].iter().position(|t| t.name == s.name) {
-                return Err(invalid(
-                    o,
-                    &key("name"),
+                return Err(at.key("name").invalid(
                     format!("{:?}", s.name),
-                    &format!("already used by signals[{j}]"),
+                    format!("already used by signals[{j}]"),
                 ));
             }
             if let Some(j) = self.signals[..i]
                 .iter()
                 .position(|t| t.topic == s.topic && t.field == s.field)
             {
-                return Err(invalid(
-                    o,
-                    &key("field"),
+                return Err(at.key("field").invalid(
                     format!("{:?}", s.field),
-                    &format!("topic and field already mapped by signals[{j}]"),
+                    format!("topic and field already mapped by signals[{j}]"),
                 ));
             }
-            if !(s.max_age_s > 0.0 && s.max_age_s.is_finite()) {
-                return Err(invalid(
-                    o,
-                    &key("max_age_s"),
-                    s.max_age_s,
-                    "must be a positive finite number of seconds",
-                ));
-            }
+            at.key("max_age_s").check(s.max_age_s, ranges::MAX_AGE_S)?;
         }
-        let st = &self.staleness;
-        if !(st.check_period_s > 0.0 && st.check_period_s.is_finite()) {
-            return Err(invalid(
-                o,
-                "staleness.check_period_s",
-                st.check_period_s,
-                "must be a positive finite number of seconds",
-            ));
+        let st = root.key("staleness");
+        st.key("check_period_s")
+            .check(self.staleness.check_period_s, ranges::CHECK_PERIOD_S)?;
+        if let DebounceConfig::Time(t) = &self.staleness.debounce {
+            let d = st.key("debounce");
+            d.key("failed_time_s")
+                .check(t.failed_time_s, ranges::DEBOUNCE_TIME_S)?;
+            d.key("passed_time_s")
+                .check(t.passed_time_s, ranges::DEBOUNCE_TIME_S)?;
         }
         // The event memory validates DTCs, priority and debounce; rename its keys to ours.
-        self.staleness_memory_config().validate().map_err(|e| {
-            let key = rename_event_key(&e.field);
-            invalid(o, &key, &e.value, &e.reason)
-        })?;
+        self.staleness_memory_config()
+            .validate()
+            .map_err(|e| rename_event_key(&root, &e.field).invalid(&e.value, e.reason))?;
         for (i, t) in self.truth.iter().enumerate() {
-            for (key, v) in [
-                ("topic", &t.topic),
-                ("field", &t.field),
-                ("estimate", &t.estimate),
-            ] {
-                if v.trim().is_empty() {
-                    return Err(invalid(
-                        o,
-                        &format!("truth[{i}].{key}"),
-                        "\"\"",
-                        "must not be empty",
-                    ));
-                }
-            }
-            if self.truth[..i].iter().any(|u| u.topic == t.topic) {
-                return Err(invalid(
-                    o,
-                    &format!("truth[{i}].topic"),
-                    &t.topic,
-                    "is already a truth topic",
+            let at = root.key("truth").index(i);
+            at.key("topic").check_name(&t.topic)?;
+            at.key("field").check_name(&t.field)?;
+            at.key("estimate").check_name(&t.estimate)?;
+            if let Some(j) = self.truth[..i].iter().position(|u| u.topic == t.topic) {
+                return Err(at.key("topic").invalid(
+                    format!("{:?}", t.topic),
+                    format!("is already the topic of truth[{j}]"),
                 ));
             }
         }
-        let g = self.replay.max_gap_s;
-        if !(g > 0.0 && g.is_finite()) {
-            return Err(invalid(
-                o,
-                "replay.max_gap_s",
-                g,
-                "must be a positive finite number of seconds",
-            ));
+        root.key("replay")
+            .key("max_gap_s")
+            .check(self.replay.max_gap_s, ranges::MAX_GAP_S)?;
+        // A limit of 0 would refuse every file; the largest is whatever a u64 holds (a host
+        // that trusts its files may lift a limit altogether).
+        for (key, v) in self.replay.limits.entries() {
+            if let Some(v) = v {
+                root.key("replay")
+                    .key("limits")
+                    .key(key)
+                    .check_count(v, 1, u64::MAX, "")?;
+            }
+        }
+        for (key, path) in [
+            ("throttle_config", &self.monitors.throttle_config),
+            ("intake_config", &self.monitors.intake_config),
+        ] {
+            if path.as_ref().is_some_and(|p| p.as_os_str().is_empty()) {
+                return Err(root
+                    .key("monitors")
+                    .key(key)
+                    .invalid("\"\"", "must name a file"));
+            }
         }
         Ok(())
     }
@@ -387,7 +451,7 @@ impl RuntimeConfig {
 
     /// An empty signal table of the configured signals.
     pub fn signal_table(&self) -> Result<SignalTable, ConfigError> {
-        SignalTable::new(self.signal_specs()).map_err(|e| ConfigError::Invalid {
+        SignalTable::new(self.signal_specs()).map_err(|e| ConfigError::Message {
             origin: self.origin.clone(),
             message: e.to_string(),
         })
@@ -422,21 +486,20 @@ pub fn stale_event_name(signal: &str) -> String {
     format!("{signal}_no_signal")
 }
 
-/// `events[i].dtc` -> `signals[i].stale_dtc`, `events[i].priority` -> `staleness.priority`,
-/// `events[i].debounce.x` -> `staleness.debounce.x`.
-fn rename_event_key(field: &str) -> String {
-    let Some(rest) = field.strip_prefix("events[") else {
-        return field.to_string();
+/// The key of the event memory's `events[i].<key>` in this file: `events[i].dtc` ->
+/// `signals[i].stale_dtc`, `events[i].name` -> `signals[i].name`, `events[i].priority` ->
+/// `[staleness] priority`, `events[i].debounce.x` -> `[staleness] debounce.x`.
+fn rename_event_key(root: &KeyPath, field: &str) -> KeyPath {
+    let Some((index, key)) = field
+        .strip_prefix("events[")
+        .and_then(|rest| rest.split_once("]."))
+    else {
+        return root.join(field);
     };
-    let Some((index, key)) = rest.split_once("].") else {
-        return field.to_string();
-    };
-    if key == "dtc" {
-        format!("signals[{index}].stale_dtc")
-    } else if key == "name" {
-        format!("signals[{index}].name")
-    } else {
-        format!("staleness.{key}")
+    match (index.parse::<usize>(), key) {
+        (Ok(i), "dtc") => root.key("signals").index(i).key("stale_dtc"),
+        (Ok(i), "name") => root.key("signals").index(i).key("name"),
+        _ => root.key("staleness").join(key),
     }
 }
 
@@ -503,7 +566,7 @@ mod tests {
         let e = RuntimeConfig::parse(&text, "x.toml")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("staleness.priority"), "{e}");
+        assert!(e.contains("[staleness] priority = 0"), "{e}");
 
         let text = DEFAULT_RUNTIME_TOML.replace("name = \"tps\"", "name = \"motor_voltage\"");
         let e = RuntimeConfig::parse(&text, "x.toml")

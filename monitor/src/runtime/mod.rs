@@ -69,7 +69,7 @@ use crate::scheduler::Scheduler;
 use crate::signal_table::{SampleError, SignalId, SignalTable};
 use crate::staleness::StalenessMonitor;
 
-pub use config::RuntimeConfig;
+pub use config::{ReadLimits, RuntimeConfig};
 pub use ingest::{QueueStats, QueuedSample, SampleProducer};
 pub use sink::{EstimateRecord, EventQueue, EventRecord, NullSink, Sink, Stamped};
 pub use uds::UdsServer;
@@ -951,7 +951,7 @@ fn configure_freeze_frames(
 ) -> Result<(), RuntimeError> {
     let ff = &cfg.freeze_frames;
     let invalid = |message: String| {
-        RuntimeError::Config(ConfigError::Invalid {
+        RuntimeError::Config(ConfigError::Message {
             origin: cfg.origin.clone(),
             message,
         })

@@ -1,10 +1,14 @@
 //! Settings of the throttle monitor (`[monitor]` in `config/throttle.toml`). Every key has a
 //! default, so the table may be partial or absent.
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
+
+use crate::config::ConfigError;
+use crate::config_key::{check_cusum, KeyPath, Range};
 
 /// Throttle monitor settings. Units in the key names; `_v` volts, `_deg` degrees, `_s` seconds.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+/// Every key is checked against its range by [`ThrottleMonitorConfig::validate`].
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ThrottleMonitorConfig {
     /// Runtime signal names of the motor voltage, the position sensor and the wattmeter.
@@ -277,5 +281,350 @@ impl Default for ThrottleMonitorConfig {
             dtc_wattmeter: "P1651-64".into(),
             dtc_position_fallback: "P2106-00".into(),
         }
+    }
+}
+
+/// Admissible ranges of the `[monitor]` keys.
+pub mod ranges {
+    use crate::config_key::Range;
+
+    /// `period_s`: the monitor's step (the model's 1 ms sampling period).
+    pub const PERIOD_S: Range = Range::closed(1e-4, 1.0, "s");
+    /// Durations that must be positive (persistence, windows, heal times): from 100 us (the
+    /// fastest step; a shorter time is one step) to an hour.
+    pub const DURATION_S: Range = Range::closed(1e-4, 3600.0, "s");
+    /// Durations that may be 0 (settle time).
+    pub const DURATION0_S: Range = Range::closed(0.0, 3600.0, "s");
+    /// Lag tolerances of the sensors.
+    pub const LAG_S: Range = Range::closed(0.0, 1.0, "s");
+    /// Short windows of the decision and the motion test, and rail persistence.
+    pub const WINDOW_S: Range = Range::closed(1e-4, 60.0, "s");
+    /// TPS noise standard deviations.
+    pub const TPS_NOISE_V: Range = Range::closed(1e-6, 1.0, "V");
+    /// Wattmeter noise standard deviations.
+    pub const WATT_NOISE_W: Range = Range::closed(1e-6, 100.0, "W");
+    /// `wattmeter_r_floor` (W^2).
+    pub const WATT_R_FLOOR: Range = Range::closed(0.0, 1e4, "W^2");
+    /// TPS voltages (rails, tolerances).
+    pub const VOLTS: Range = Range::closed(0.0, 50.0, "V");
+    /// Angles that must be positive.
+    pub const ANGLE_DEG: Range = Range::above(0.0, 90.0, "deg");
+    /// Angles that may be 0.
+    pub const ANGLE0_DEG: Range = Range::closed(0.0, 90.0, "deg");
+    /// Shares (relative errors, gain tolerances).
+    pub const FRACTION: Range = Range::closed(0.0, 1.0, "");
+    /// `fallback_r_scale`.
+    pub const R_SCALE: Range = Range::closed(1e-3, 1e3, "");
+    /// NIS gate and cap (per sample).
+    pub const NIS: Range = Range::above(0.0, 1e12, "");
+    /// NIS window threshold and step-test sigma (calibration sets 1e12 for "out of reach").
+    pub const NIS_SUM: Range = Range::above(0.0, 1e15, "");
+    /// `cusum_clip_sigma`.
+    pub const CLIP_SIGMA: Range = Range::above(0.0, 1e3, "sigma");
+    /// `tps_step_motion_scale`.
+    pub const MOTION_SCALE: Range = Range::closed(0.0, 1e3, "");
+    /// `tps_step_rho_floor` (velocity state, model units).
+    pub const RHO_FLOOR: Range = Range::closed(0.0, 1e6, "");
+    /// `watt_model_error_w`.
+    pub const WATT_W: Range = Range::closed(0.0, 1e3, "W");
+}
+
+impl ThrottleMonitorConfig {
+    /// Checks every key against its range and the relations between keys; `at` is the path of
+    /// the `[monitor]` table (errors name `origin: [monitor] key = value: reason`).
+    pub fn validate(&self, at: &KeyPath) -> Result<(), ConfigError> {
+        use ranges as r;
+        for (key, v) in [
+            ("motor_voltage_signal", &self.motor_voltage_signal),
+            ("tps_signal", &self.tps_signal),
+            ("wattmeter_signal", &self.wattmeter_signal),
+        ] {
+            at.key(key).check_name(v)?;
+        }
+        let checks: [(&str, f64, Range); 43] = [
+            ("period_s", self.period_s, r::PERIOD_S),
+            ("tps_noise_v", self.tps_noise_v, r::TPS_NOISE_V),
+            ("tps_noise_min_v", self.tps_noise_min_v, r::TPS_NOISE_V),
+            ("tps_noise_max_v", self.tps_noise_max_v, r::TPS_NOISE_V),
+            ("wattmeter_noise_w", self.wattmeter_noise_w, r::WATT_NOISE_W),
+            (
+                "wattmeter_noise_min_w",
+                self.wattmeter_noise_min_w,
+                r::WATT_NOISE_W,
+            ),
+            (
+                "wattmeter_noise_max_w",
+                self.wattmeter_noise_max_w,
+                r::WATT_NOISE_W,
+            ),
+            ("wattmeter_r_floor", self.wattmeter_r_floor, r::WATT_R_FLOOR),
+            ("fallback_r_scale", self.fallback_r_scale, r::R_SCALE),
+            (
+                "noise_time_constant_s",
+                self.noise_time_constant_s,
+                r::DURATION_S,
+            ),
+            ("noise_settle_s", self.noise_settle_s, r::DURATION0_S),
+            ("rail_low_v", self.rail_low_v, r::VOLTS),
+            ("rail_high_v", self.rail_high_v, r::VOLTS),
+            ("rail_margin_deg", self.rail_margin_deg, r::ANGLE0_DEG),
+            (
+                "static_map_error_frac",
+                self.static_map_error_frac,
+                r::FRACTION,
+            ),
+            ("rail_persist_s", self.rail_persist_s, r::WINDOW_S),
+            ("watt_rail_persist_s", self.watt_rail_persist_s, r::WINDOW_S),
+            (
+                "intermittent_window_s",
+                self.intermittent_window_s,
+                r::DURATION_S,
+            ),
+            ("tps_gate_nis", self.tps_gate_nis, r::NIS),
+            ("tps_nis_cap", self.tps_nis_cap, r::NIS),
+            ("tps_nis_threshold", self.tps_nis_threshold, r::NIS_SUM),
+            ("tps_tolerance_v", self.tps_tolerance_v, r::VOLTS),
+            ("tps_lag_tolerance_s", self.tps_lag_tolerance_s, r::LAG_S),
+            ("tps_step_sigma", self.tps_step_sigma, r::NIS_SUM),
+            ("tps_step_floor_v", self.tps_step_floor_v, r::VOLTS),
+            (
+                "tps_step_motion_scale",
+                self.tps_step_motion_scale,
+                r::MOTION_SCALE,
+            ),
+            (
+                "tps_step_mode_margin_deg",
+                self.tps_step_mode_margin_deg,
+                r::ANGLE0_DEG,
+            ),
+            ("tps_step_rho_floor", self.tps_step_rho_floor, r::RHO_FLOOR),
+            ("watt_model_error_w", self.watt_model_error_w, r::WATT_W),
+            ("watt_gain_tolerance", self.watt_gain_tolerance, r::FRACTION),
+            ("watt_lag_tolerance_s", self.watt_lag_tolerance_s, r::LAG_S),
+            ("watt_confirm_s", self.watt_confirm_s, r::DURATION_S),
+            ("cusum_clip_sigma", self.cusum_clip_sigma, r::CLIP_SIGMA),
+            ("decision_window_s", self.decision_window_s, r::WINDOW_S),
+            ("motion_window_s", self.motion_window_s, r::WINDOW_S),
+            (
+                "static_tps_range_deg",
+                self.static_tps_range_deg,
+                r::ANGLE_DEG,
+            ),
+            ("driven_range_deg", self.driven_range_deg, r::ANGLE_DEG),
+            (
+                "static_map_from_deg",
+                self.static_map_from_deg,
+                r::ANGLE0_DEG,
+            ),
+            (
+                "frozen_driven_range_deg",
+                self.frozen_driven_range_deg,
+                r::ANGLE_DEG,
+            ),
+            ("plate_persist_s", self.plate_persist_s, r::DURATION_S),
+            ("heal_s", self.heal_s, r::DURATION_S),
+            ("heal_agreement_deg", self.heal_agreement_deg, r::ANGLE_DEG),
+            (
+                "heal_disagreement_s",
+                self.heal_disagreement_s,
+                r::DURATION_S,
+            ),
+        ];
+        for (key, v, range) in checks {
+            at.key(key).check(v, range)?;
+        }
+        let show = crate::config_key::show;
+        // The configured noise levels lie within their online-estimate bounds.
+        for (level, min, max, v, lo, hi) in [
+            (
+                "tps_noise_v",
+                "tps_noise_min_v",
+                "tps_noise_max_v",
+                self.tps_noise_v,
+                self.tps_noise_min_v,
+                self.tps_noise_max_v,
+            ),
+            (
+                "wattmeter_noise_w",
+                "wattmeter_noise_min_w",
+                "wattmeter_noise_max_w",
+                self.wattmeter_noise_w,
+                self.wattmeter_noise_min_w,
+                self.wattmeter_noise_max_w,
+            ),
+        ] {
+            if !(lo <= v) {
+                return Err(at
+                    .key(min)
+                    .invalid(show(lo), format!("must be at most `{level}` = {}", show(v))));
+            }
+            if !(v <= hi) {
+                return Err(at.key(max).invalid(
+                    show(hi),
+                    format!("must be at least `{level}` = {}", show(v)),
+                ));
+            }
+        }
+        if !(self.rail_low_v < self.rail_high_v) {
+            return Err(at.key("rail_high_v").invalid(
+                show(self.rail_high_v),
+                format!("must be above `rail_low_v` = {}", show(self.rail_low_v)),
+            ));
+        }
+        if !(self.heal_disagreement_s < self.heal_s) {
+            // A disagreement as long as the heal time could never stop a heal.
+            return Err(at.key("heal_disagreement_s").invalid(
+                show(self.heal_disagreement_s),
+                format!("must be shorter than `heal_s` = {} s", show(self.heal_s)),
+            ));
+        }
+        let ring = super::RING as u64;
+        let motion = (self.motion_window_s / self.period_s).round();
+        if !(motion >= 1.0 && motion <= ring as f64) {
+            return Err(at.key("motion_window_s").invalid(
+                show(self.motion_window_s),
+                format!(
+                    "must span 1 to {ring} steps of `period_s` = {} s (spans {motion})",
+                    show(self.period_s)
+                ),
+            ));
+        }
+        at.key("intermittent_count").check_count(
+            self.intermittent_count as u64,
+            1,
+            ring,
+            "episodes",
+        )?;
+        at.key("tps_nis_window")
+            .check_count(self.tps_nis_window as u64, 1, ring, "samples")?;
+        at.key("frozen_samples")
+            .check_count(self.frozen_samples, 2, 1_000_000, "samples")?;
+        if self.frozen_alone_samples != 0 {
+            at.key("frozen_alone_samples").check_count(
+                self.frozen_alone_samples,
+                u64::from(self.frozen_samples),
+                10_000_000,
+                "samples (or 0: never), at least `frozen_samples`",
+            )?;
+        }
+        at.key("watt_confirm_alarms")
+            .check_count(self.watt_confirm_alarms, 1, 1000, "alarms")?;
+        at.key("drift_confirm_alarms").check_count(
+            self.drift_confirm_alarms,
+            1,
+            u64::from(self.watt_confirm_alarms),
+            "alarms (at most `watt_confirm_alarms`)",
+        )?;
+        check_cusum(
+            at,
+            "tps_cusum_min_bias_sigma",
+            self.tps_cusum_min_bias_sigma,
+            "tps_cusum_threshold",
+            self.tps_cusum_threshold,
+        )?;
+        check_cusum(
+            at,
+            "watt_cusum_min_bias_sigma",
+            self.watt_cusum_min_bias_sigma,
+            "watt_cusum_threshold",
+            self.watt_cusum_threshold,
+        )?;
+        check_cusum(
+            at,
+            "watt_cusum_min_bias_sigma",
+            self.watt_cusum_min_bias_sigma,
+            "watt_only_cusum_threshold",
+            self.watt_only_cusum_threshold,
+        )?;
+        at.check_dtcs(&[
+            ("dtc_tps_low", &self.dtc_tps_low),
+            ("dtc_tps_high", &self.dtc_tps_high),
+            ("dtc_tps_performance", &self.dtc_tps_performance),
+            ("dtc_tps_intermittent", &self.dtc_tps_intermittent),
+            ("dtc_plate_stuck", &self.dtc_plate_stuck),
+            ("dtc_wattmeter", &self.dtc_wattmeter),
+            ("dtc_position_fallback", &self.dtc_position_fallback),
+        ])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    type Change = fn(&mut ThrottleMonitorConfig);
+
+    #[test]
+    fn defaults_are_valid_and_each_error_names_the_key_written() {
+        let at = KeyPath::file("t.toml").key("monitor");
+        ThrottleMonitorConfig::default()
+            .validate(&at)
+            .expect("defaults");
+        let cases: [(Change, &str); 8] = [
+            // Was reported as `tps_cusum_threshold`.
+            (
+                |c| c.tps_cusum_min_bias_sigma = 0.0,
+                "t.toml: [monitor] tps_cusum_min_bias_sigma = 0.0: must be above 0 and at most 100 sigma",
+            ),
+            // Was reported as `motion_window_s`.
+            (
+                |c| c.period_s = 1e300,
+                "t.toml: [monitor] period_s = 1e300: must be between 1e-4 and 1 s",
+            ),
+            // Was never checked: a panic in `f64::clamp` at the first step.
+            (
+                |c| c.cusum_clip_sigma = f64::NAN,
+                "t.toml: [monitor] cusum_clip_sigma = NaN: must be above 0 and at most 1000 sigma",
+            ),
+            (
+                |c| c.cusum_clip_sigma = -1.0,
+                "t.toml: [monitor] cusum_clip_sigma = -1.0: must be above 0",
+            ),
+            // Was reported as `events[0].dtc`.
+            (
+                |c| c.dtc_tps_low = "X0122".into(),
+                "t.toml: [monitor] dtc_tps_low = \"X0122\": ",
+            ),
+            (
+                |c| c.dtc_wattmeter = "P0122-16".into(),
+                "t.toml: [monitor] dtc_wattmeter = \"P0122-16\": DTC P0122-16 is already `dtc_tps_low`",
+            ),
+            // Was reported as matrix `R`.
+            (
+                |c| c.tps_noise_v = 1e300,
+                "t.toml: [monitor] tps_noise_v = 1e300: must be between 1e-6 and 1 V",
+            ),
+            (
+                |c| c.watt_cusum_threshold = 5000.0,
+                "t.toml: [monitor] watt_cusum_threshold = 5000.0: must be at most 1398 with `watt_cusum_min_bias_sigma` = 0.5",
+            ),
+        ];
+        for (change, want) in cases {
+            let mut c = ThrottleMonitorConfig::default();
+            change(&mut c);
+            let e = c.validate(&at).unwrap_err().to_string();
+            assert!(e.starts_with(want), "{e}\nwanted: {want}");
+        }
+    }
+
+    #[test]
+    fn the_monitor_refuses_a_bad_clip_instead_of_panicking() {
+        let cfg = crate::config::ThrottleConfig::load(None).expect("embedded");
+        let model = fdd_estimators::models::throttle::ThrottleModel::new(cfg.model).expect("model");
+        let table = crate::signal_table::SignalTable::with_names(
+            &["motor_voltage", "tps", "wattmeter"],
+            5_000_000,
+        )
+        .expect("table");
+        let mut m = cfg.monitor.clone();
+        m.cusum_clip_sigma = -1.0;
+        let e = super::super::ThrottleMonitor::new(model, 5.0, 90.0, &m, &table)
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(
+            e.starts_with("throttle monitor settings: [monitor] cusum_clip_sigma = -1.0: "),
+            "{e}"
+        );
     }
 }

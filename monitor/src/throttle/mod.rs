@@ -73,6 +73,7 @@ use span_window::SpanWindow;
 use step_test::{StepTest, StepTestConfig};
 use still_run::StillRun;
 
+use crate::config_key::KeyPath;
 use crate::monitor::{Monitor, Output, OutputSink};
 use crate::monitor_events::{EventSpec, FreezeValues, MonitorEvents};
 use crate::signal_table::{SignalId, SignalTable};
@@ -93,7 +94,7 @@ const MAP_CHECK_STEADY_V: f64 = 0.01;
 const TRAP_BAND_DEG: f64 = 5.0;
 const TRAP_STEPS: u32 = 300;
 /// Capacity of the fixed rings (NIS window, motion window, dropout times).
-const RING: usize = 512;
+pub(crate) const RING: usize = 512;
 /// Time constant of the low-pass through which the TPS's standing still across holds is
 /// judged (s): 20 readings average 10 mV of noise down to 0.04 deg.
 const STILL_TPS_TAU_S: f64 = 0.02;
@@ -190,11 +191,19 @@ pub const ESTIMATES: [&str; 1] = ["throttle_angle"];
 /// Index of the switch event in [`EVENT_NAMES`].
 const SWITCH_EVENT: usize = 6;
 
+/// Origin named by the errors of settings given to [`ThrottleMonitor::new`] directly (a
+/// configuration file is checked, naming the file, when it is parsed:
+/// [`crate::config::ThrottleConfig::parse`]).
+pub const SETTINGS_ORIGIN: &str = "throttle monitor settings";
+
 /// Errors building the monitor.
 #[derive(Debug, thiserror::Error)]
 pub enum ThrottleMonitorError {
     #[error("throttle monitor: signal `{0}` is not in the signal table")]
     MissingSignal(String),
+    /// A setting out of its range ([`ThrottleMonitorConfig::validate`]).
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
     #[error("throttle monitor: invalid setting `{key}`: {reason}")]
     Setting { key: &'static str, reason: String },
     #[error("throttle monitor: {0}")]
@@ -396,85 +405,8 @@ impl ThrottleMonitor {
             id(&cfg.tps_signal)?,
             id(&cfg.wattmeter_signal)?,
         ];
-        for (key, v) in [
-            ("period_s", cfg.period_s),
-            ("tps_noise_v", cfg.tps_noise_v),
-            ("wattmeter_noise_w", cfg.wattmeter_noise_w),
-            ("rail_persist_s", cfg.rail_persist_s),
-            ("watt_rail_persist_s", cfg.watt_rail_persist_s),
-            ("decision_window_s", cfg.decision_window_s),
-            ("motion_window_s", cfg.motion_window_s),
-            ("intermittent_window_s", cfg.intermittent_window_s),
-            ("heal_s", cfg.heal_s),
-            ("noise_time_constant_s", cfg.noise_time_constant_s),
-            ("fallback_r_scale", cfg.fallback_r_scale),
-            ("plate_persist_s", cfg.plate_persist_s),
-            ("frozen_driven_range_deg", cfg.frozen_driven_range_deg),
-            ("watt_confirm_s", cfg.watt_confirm_s),
-            ("tps_step_sigma", cfg.tps_step_sigma),
-            ("heal_agreement_deg", cfg.heal_agreement_deg),
-            ("heal_disagreement_s", cfg.heal_disagreement_s),
-        ] {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err(setting(key, format!("{v} must be a positive number")));
-            }
-        }
-        for (key, v) in [
-            ("watt_model_error_w", cfg.watt_model_error_w),
-            ("tps_tolerance_v", cfg.tps_tolerance_v),
-            ("tps_lag_tolerance_s", cfg.tps_lag_tolerance_s),
-            ("watt_lag_tolerance_s", cfg.watt_lag_tolerance_s),
-            ("noise_settle_s", cfg.noise_settle_s),
-            ("tps_step_floor_v", cfg.tps_step_floor_v),
-            ("watt_gain_tolerance", cfg.watt_gain_tolerance),
-            ("tps_step_motion_scale", cfg.tps_step_motion_scale),
-            ("tps_step_mode_margin_deg", cfg.tps_step_mode_margin_deg),
-            ("tps_step_rho_floor", cfg.tps_step_rho_floor),
-            ("static_map_error_frac", cfg.static_map_error_frac),
-            ("static_map_from_deg", cfg.static_map_from_deg),
-        ] {
-            if !(v >= 0.0 && v.is_finite()) {
-                return Err(setting(key, format!("{v} must be a non-negative number")));
-            }
-        }
-        if cfg.frozen_alone_samples != 0 && cfg.frozen_alone_samples < cfg.frozen_samples {
-            return Err(setting(
-                "frozen_alone_samples",
-                "must be 0 (never) or at least frozen_samples",
-            ));
-        }
-        if cfg.watt_confirm_alarms == 0 {
-            return Err(setting("watt_confirm_alarms", "must be at least 1"));
-        }
-        if cfg.drift_confirm_alarms == 0 || cfg.drift_confirm_alarms > cfg.watt_confirm_alarms {
-            return Err(setting(
-                "drift_confirm_alarms",
-                "must be at least 1 and at most watt_confirm_alarms",
-            ));
-        }
-        if cfg.heal_disagreement_s >= cfg.heal_s {
-            // A disagreement as long as the heal time could never stop a heal.
-            return Err(setting(
-                "heal_disagreement_s",
-                "must be shorter than heal_s",
-            ));
-        }
-        if !(cfg.rail_low_v < cfg.rail_high_v) {
-            return Err(setting("rail_low_v", "must be below rail_high_v"));
-        }
-        if cfg.tps_nis_window == 0 || cfg.tps_nis_window > RING {
-            return Err(setting("tps_nis_window", format!("must be 1..={RING}")));
-        }
+        cfg.validate(&KeyPath::file(SETTINGS_ORIGIN).key("monitor"))?;
         let motion = (cfg.motion_window_s / cfg.period_s).round() as usize;
-        if motion == 0 || motion > RING {
-            return Err(setting(
-                "motion_window_s",
-                format!("must span 1..={RING} steps"),
-            ));
-        }
-        if cfg.intermittent_count == 0 || cfg.intermittent_count > RING {
-            return Err(setting("intermittent_count", format!("must be 1..={RING}")));
-        }
         let scale = model.params().angle_scale;
         let tps = PositionSensor::new(tps_full_scale_v, tps_full_scale_deg, scale);
         let both = PositionAndWattmeter { position: tps };
@@ -540,18 +472,15 @@ impl ThrottleMonitor {
             q,
             Matrix1::new(cfg.fallback_r_scale * rw),
         )?;
-        let cusum =
-            |key: &'static str, delta: f64, h: f64| -> Result<Cusum, ThrottleMonitorError> {
-                if !(delta > 0.0 && h > 0.0) {
-                    return Err(setting(key, "min bias and threshold must be positive"));
-                }
-                let arl = two_sided_arl(0.0, delta / 2.0, h);
-                Ok(Cusum::new(&CusumConfig {
-                    min_bias_sigma: delta,
-                    mean_steps_between_false_alarms: Some(arl),
-                    false_alarm_rate: None,
-                })?)
-            };
+        // Bias and threshold are checked by `validate` (each in its range, a finite run length).
+        let cusum = |delta: f64, h: f64| -> Result<Cusum, ThrottleMonitorError> {
+            let arl = two_sided_arl(0.0, delta / 2.0, h);
+            Ok(Cusum::new(&CusumConfig {
+                min_bias_sigma: delta,
+                mean_steps_between_false_alarms: Some(arl),
+                false_alarm_rate: None,
+            })?)
+        };
         let dtcs = [
             &cfg.dtc_tps_low,
             &cfg.dtc_tps_high,
@@ -584,21 +513,9 @@ impl ThrottleMonitor {
             u_alpha: (cfg.period_s / 0.033).min(1.0),
             nis_ring: Ring::new(cfg.tps_nis_window),
             nis_sum: 0.0,
-            cusum_tps: cusum(
-                "tps_cusum_threshold",
-                cfg.tps_cusum_min_bias_sigma,
-                cfg.tps_cusum_threshold,
-            )?,
-            cusum_watt: cusum(
-                "watt_cusum_threshold",
-                cfg.watt_cusum_min_bias_sigma,
-                cfg.watt_cusum_threshold,
-            )?,
-            cusum_watt_only: cusum(
-                "watt_only_cusum_threshold",
-                cfg.watt_cusum_min_bias_sigma,
-                cfg.watt_only_cusum_threshold,
-            )?,
+            cusum_tps: cusum(cfg.tps_cusum_min_bias_sigma, cfg.tps_cusum_threshold)?,
+            cusum_watt: cusum(cfg.watt_cusum_min_bias_sigma, cfg.watt_cusum_threshold)?,
+            cusum_watt_only: cusum(cfg.watt_cusum_min_bias_sigma, cfg.watt_only_cusum_threshold)?,
             tps_hist: SpanWindow::new(motion),
             eq_hist: SpanWindow::new(motion),
             map_check: MapCheck::new(MAP_CHECK_WINDOW, MAP_CHECK_SETTLE, MAP_CHECK_STEADY_V),
