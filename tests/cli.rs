@@ -780,3 +780,29 @@ fn a_log_over_a_read_limit_names_the_key_that_raises_it() {
     );
     assert!(ok, "{err}");
 }
+
+/// `--config /dev/zero` (a file with no end) was read until memory ran out; it is now refused
+/// after the 4 MiB a text file may have, naming the file.
+#[test]
+fn a_config_without_an_end_is_refused_not_read_forever() {
+    let log = root().join("fixtures/data/throttle_tps_open.mcap");
+    let log = log.to_str().expect("utf-8 path");
+    for args in [
+        vec!["replay", log, "--config", "/dev/zero", "--no-progress"],
+        vec![
+            "reproduce",
+            "table2",
+            "--samples",
+            "10",
+            "--config",
+            "/dev/zero",
+        ],
+    ] {
+        let (ok, _, err) = run_in(root(), &args);
+        assert!(!ok, "{args:?} succeeded");
+        assert!(
+            err.contains("/dev/zero") && err.contains("larger than"),
+            "{args:?}: {err}"
+        );
+    }
+}
