@@ -45,11 +45,11 @@ pub enum Outcome {
 
 /// Simulated time a configuration target drives a runtime for, ns (0.3 s: several hundred
 /// throttle steps and a few dozen intake steps, enough to run every test once).
-const DRIVE_NS: u64 = 300_000_000;
+pub const DRIVE_NS: u64 = 300_000_000;
 
 /// Longest scenario the `scenario` target simulates, s; longer ones are only parsed and
 /// validated (a valid 24-hour scenario is not a defect, just slow).
-const MAX_SIMULATED_S: f64 = 1.0;
+pub const MAX_SIMULATED_S: f64 = 1.0;
 
 thread_local! {
     /// One scratch directory per thread, reused for every input (the reader and the replay
