@@ -726,3 +726,27 @@ proptest::proptest! {
         }
     }
 }
+
+/// A record header inside a 12 kB chunk claiming 238 MB made the mcap crate's reader reserve
+/// the whole length before decompressing it: 4 kB of input cost 240 MB (the `mcap_reader` fuzz
+/// target's input, kept in fuzz/regressions/). The records of a chunk are now limited to what
+/// the chunk can hold, so the record is refused by its length instead of being allocated.
+#[test]
+fn a_record_longer_than_its_chunk_is_refused_before_it_is_allocated() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/regressions/mcap_reader/a_record_claiming_more_than_its_chunk_holds.mcap");
+    let mut reader = LogReader::open(&path).expect("the file opens (linear)");
+    let mut errors = Vec::new();
+    while let Some(item) = reader.next_message() {
+        match item {
+            Ok(m) => panic!("a message from a damaged chunk: {}", m.topic),
+            Err(e) => errors.push(e.to_string()),
+        }
+    }
+    assert!(
+        errors
+            .first()
+            .is_some_and(|e| e.contains("length exceeds limit") && e.contains("238157865")),
+        "{errors:?}"
+    );
+}

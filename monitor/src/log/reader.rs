@@ -1232,12 +1232,24 @@ impl LogReader {
         // The chunk is decompressed whole and its CRC checked before any record is read: with
         // the mcap crate this is also the fastest way (record-by-record streaming decompression
         // is slower than decompressing and hashing the whole chunk).
+        // The mcap crate's reader reserves a record's whole declared length before
+        // decompressing it, so a record header inside a small chunk claiming hundreds of
+        // megabytes would be allocated (found by the `mcap_reader` fuzz target: 4 KB of input,
+        // 240 MB). No record of this chunk can be longer than the chunk record itself or its
+        // declared uncompressed size (already within the decompression budget), so that bounds
+        // every allocation for this chunk.
+        let declared = body
+            .get(16..24)
+            .and_then(|b| Cur::new(b).u64())
+            .and_then(|d| usize::try_from(d).ok())
+            .unwrap_or(0);
+        let chunk_limit = limit.min(n.max(declared));
         let mut lr = LinearReader::new_with_options(LinearReaderOptions {
             skip_start_magic: true,
             skip_end_magic: true,
             validate_chunk_crcs: true,
             prevalidate_chunk_crcs: true,
-            record_length_limit: Some(limit),
+            record_length_limit: Some(chunk_limit),
             ..Default::default()
         });
         let total = RECORD_HEADER as usize + n;
