@@ -1200,10 +1200,11 @@ impl LogReader {
             self.chunk_buf = body;
             return Err(self.err_io(at, e));
         }
-        // The decompression budget, from the chunk's declared uncompressed size (bytes 16..24
-        // of the body), before anything is decompressed. Neither decoding path decompresses
-        // more than the declared size.
-        if let Some(declared) = body.get(16..24).and_then(|b| Cur::new(b).u64()) {
+        // The chunk's declared uncompressed size (bytes 16..24 of the body).
+        let declared = body.get(16..24).and_then(|b| Cur::new(b).u64());
+        // The decompression budget, from the declared size, before anything is decompressed.
+        // Neither decoding path decompresses more than the declared size.
+        if let Some(declared) = declared {
             let total = self.stats.decompressed_bytes.saturating_add(declared);
             if total > self.decompressed_budget {
                 self.chunk_buf = body;
@@ -1238,11 +1239,7 @@ impl LogReader {
         // 240 MB). No record of this chunk can be longer than the chunk record itself or its
         // declared uncompressed size (already within the decompression budget), so that bounds
         // every allocation for this chunk.
-        let declared = body
-            .get(16..24)
-            .and_then(|b| Cur::new(b).u64())
-            .and_then(|d| usize::try_from(d).ok())
-            .unwrap_or(0);
+        let declared = declared.and_then(|d| usize::try_from(d).ok()).unwrap_or(0);
         let chunk_limit = limit.min(n.max(declared));
         let mut lr = LinearReader::new_with_options(LinearReaderOptions {
             skip_start_magic: true,
