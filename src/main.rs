@@ -70,6 +70,10 @@ enum Command {
         /// Write the diagnostic events to this file, one JSON object per line.
         #[arg(long)]
         events: Option<PathBuf>,
+        /// Write every sample the monitors received to this CSV file (`t_ns,signal,value`, in
+        /// the order pushed): the input of a host without an MCAP reader (examples/c/host.c).
+        #[arg(long, value_name = "FILE")]
+        samples: Option<PathBuf>,
         /// No progress bar (it is only drawn when stderr is a terminal anyway).
         #[arg(long)]
         no_progress: bool,
@@ -245,6 +249,7 @@ fn run(command: Command) -> Result<()> {
             config,
             out,
             events,
+            samples,
             no_progress,
             memory,
         } => {
@@ -254,6 +259,7 @@ fn run(command: Command) -> Result<()> {
                 events,
                 progress: !no_progress,
                 memory,
+                samples,
             };
             let summary = fdd::replay::replay(&log, &cfg, &opts)?;
             emit(&summary.render())?;

@@ -10,6 +10,8 @@
 
 pub mod config;
 pub mod config_key;
+#[cfg(feature = "ffi")]
+pub mod ffi;
 pub mod intake;
 pub mod log;
 pub mod monitor;

@@ -20,6 +20,12 @@ impl SignalId {
     pub fn index(self) -> usize {
         self.0
     }
+
+    /// The id at position `index` (a host that keeps ids as integers, as the C ABI does); the
+    /// runtime refuses an index outside its table.
+    pub fn from_index(index: usize) -> Self {
+        SignalId(index)
+    }
 }
 
 /// One signal's declaration.

@@ -46,7 +46,7 @@ pub mod summary;
 mod truth;
 
 use std::fs::File;
-use std::io::{BufWriter, IsTerminal};
+use std::io::{BufWriter, IsTerminal, Write as _};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -85,6 +85,12 @@ pub enum ReplayError {
     Log(#[from] LogError),
     #[error("{}: cannot write the events file: {source}", file.display())]
     Events {
+        file: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}: cannot write the samples file: {source}", file.display())]
+    Samples {
         file: PathBuf,
         #[source]
         source: std::io::Error,
@@ -167,6 +173,9 @@ fn check_outputs(log: &Path, cfg: &RuntimeConfig, opts: &ReplayOptions) -> Resul
     if let Some(p) = &opts.events {
         outputs.push((p.clone(), "events"));
     }
+    if let Some(p) = &opts.samples {
+        outputs.push((p.clone(), "samples"));
+    }
     if let Some(base) = &opts.memory {
         outputs.extend(memory_slots(base).into_iter().map(|p| (p, "memory")));
     }
@@ -188,6 +197,7 @@ fn check_outputs(log: &Path, cfg: &RuntimeConfig, opts: &ReplayOptions) -> Resul
                 what: match *other {
                     "out" => "the --out file",
                     "events" => "the --events file",
+                    "samples" => "the --samples file",
                     _ => "a --memory slot file",
                 },
             });
@@ -208,6 +218,9 @@ pub struct ReplayOptions {
     /// `--memory`: keep the event memory in these slot files (`<base>.a`, `<base>.b`) across
     /// replays, so consecutive logs act as consecutive operation cycles of one vehicle.
     pub memory: Option<PathBuf>,
+    /// `--samples`: CSV file (`t_ns,signal,value`) of every sample the runtime accepted, in
+    /// the order pushed: the input of a host that has no MCAP reader (`examples/c/host.c`).
+    pub samples: Option<PathBuf>,
 }
 
 /// A channel, resolved on first sight.
@@ -402,6 +415,7 @@ impl Replayer<'_, '_> {
             match rt.push(sig_ids[i], t, v) {
                 Ok(()) => {
                     sig[i].samples += 1;
+                    sinks.sample(t, &s.name, v);
                     if let Some(obs) = sinks.observer.as_mut() {
                         obs.sample(t, &s.name, v);
                     }
@@ -598,6 +612,18 @@ fn replay_with(
         Some(p) => Some(LogWriter::create_with(p, WriteOptions::default())?),
     };
     let mut sinks = Sinks::new(events_file, out, &cfg.truth);
+    if let Some(p) = &opts.samples {
+        let f = File::create(p).map_err(|source| ReplayError::Samples {
+            file: p.clone(),
+            source,
+        })?;
+        let mut w = BufWriter::with_capacity(1 << 16, f);
+        writeln!(w, "t_ns,signal,value").map_err(|source| ReplayError::Samples {
+            file: p.clone(),
+            source,
+        })?;
+        sinks.samples_file = Some((p.clone(), w));
+    }
     // A monitor's truth topic is the one whose estimate it outputs; its DTCs detect that
     // topic's faults (and a monitor of none, the "no signal" monitor, any topic's).
     sinks.monitor_truth = rt

@@ -162,6 +162,8 @@ pub struct TruthTrack {
 /// `error` and checked by the replay loop after each call.
 pub struct Sinks<'o> {
     events_file: Option<(PathBuf, BufWriter<File>)>,
+    /// `--samples`: every sample the runtime accepted, as CSV.
+    pub samples_file: Option<(PathBuf, BufWriter<File>)>,
     out: Option<LogWriter<BufWriter<File>>>,
     /// The first write error; nothing more is written after it.
     pub error: Option<ReplayError>,
@@ -218,6 +220,7 @@ impl Sinks<'_> {
     ) -> Self {
         Sinks {
             events_file,
+            samples_file: None,
             out,
             error: None,
             events: 0,
@@ -466,6 +469,22 @@ impl Sinks<'_> {
         });
     }
 
+    /// Writes one row `t_ns,signal,value` of the samples file (`--samples`): the value in
+    /// Rust's shortest round-trip form, so a reader parsing it gets the same `f64`.
+    pub fn sample(&mut self, t_ns: u64, signal: &str, value: f64) {
+        if self.error.is_some() {
+            return;
+        }
+        if let Some((path, w)) = self.samples_file.as_mut() {
+            if let Err(source) = writeln!(w, "{t_ns},{signal},{value:?}") {
+                self.error = Some(ReplayError::Samples {
+                    file: path.clone(),
+                    source,
+                });
+            }
+        }
+    }
+
     /// Flushes the events file and finishes the output MCAP. Returns (events file, events
     /// written) and (out file, messages written).
     #[allow(clippy::type_complexity)]
@@ -479,6 +498,10 @@ impl Sinks<'_> {
                 source,
             })?;
             events = Some((path, self.events_written));
+        }
+        if let Some((path, mut w)) = self.samples_file.take() {
+            w.flush()
+                .map_err(|source| ReplayError::Samples { file: path, source })?;
         }
         let mut out = None;
         if let Some(w) = self.out.take() {
