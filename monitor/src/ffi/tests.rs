@@ -499,3 +499,96 @@ fn status_names_and_the_version_are_static_strings() {
         "cut and NUL-terminated"
     );
 }
+
+#[test]
+fn a_confirmed_dtc_persists_across_runtimes_built_through_the_abi() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let base =
+        std::ffi::CString::new(dir.path().join("memory").to_str().expect("UTF-8")).expect("path");
+    let build = || {
+        let mut b = null_mut();
+        let mut rt = null_mut();
+        unsafe {
+            assert_eq!(fdd_builder_new(null(), 0, &mut b), FDD_OK);
+            assert_eq!(fdd_builder_only_monitors(b, c"throttle".as_ptr()), FDD_OK);
+            assert_eq!(fdd_builder_persistence(b, base.as_ptr()), FDD_OK);
+            assert_eq!(fdd_runtime_build(b, &mut rt), FDD_OK, "{}", last_error());
+            fdd_builder_free(b);
+        }
+        rt
+    };
+    const P0123_17: u32 = 0x0001_2317; // TPS circuit high
+                                       // Two drives with the TPS shorted to 5 V: pending in the first, confirmed in the second,
+                                       // each in a runtime of its own (a power cycle between them).
+    for drive in 0..2u64 {
+        let rt = build();
+        unsafe {
+            let ids = ["motor_voltage", "tps", "wattmeter"].map(|n| {
+                let n = std::ffi::CString::new(n).expect("name");
+                let mut id = 0;
+                assert_eq!(fdd_signal(rt, n.as_ptr(), &mut id), FDD_OK);
+                id
+            });
+            let t0 = drive * 1_000_000_000;
+            assert_eq!(fdd_start_operation_cycle(rt, t0), FDD_OK);
+            for k in 0..300u64 {
+                let t = t0 + k * 1_000_000;
+                for (id, v) in ids.iter().zip([0.0, 5.0, 0.0]) {
+                    assert_eq!(fdd_push(rt, *id, t, v), FDD_OK);
+                }
+                assert_eq!(fdd_advance_to(rt, t, null_mut()), FDD_OK);
+            }
+            assert_eq!(fdd_end_operation_cycle(rt, t0 + 300_000_000), FDD_OK);
+            let mut st = 0;
+            assert_eq!(fdd_dtc_status(rt, P0123_17, &mut st), FDD_OK);
+            assert_eq!(
+                st & 0x08 != 0,
+                drive == 1,
+                "drive {drive}: status 0x{st:02X}"
+            );
+            let mut written = false;
+            assert_eq!(fdd_persist_now(rt, &mut written), FDD_OK);
+            assert!(written);
+            fdd_runtime_free(rt);
+        }
+    }
+    // A third power-up: the confirmed DTC, its freeze frame and counter are back.
+    let rt = build();
+    unsafe {
+        let mut st = 0;
+        assert_eq!(fdd_dtc_status(rt, P0123_17, &mut st), FDD_OK);
+        assert!(st & 0x08 != 0, "status 0x{st:02X}");
+        let mut ext = std::mem::MaybeUninit::<fdd_extended_data>::uninit();
+        assert_eq!(
+            fdd_dtc_extended_data(rt, P0123_17, ext.as_mut_ptr()),
+            FDD_OK
+        );
+        let ext = ext.assume_init();
+        assert!(ext.stored && ext.occurrence_counter >= 1, "{ext:?}");
+        let mut values = [fdd_freeze_value {
+            name: [0; FDD_NAME_LEN],
+            value: 0.0,
+        }; 8];
+        let mut frame = std::mem::MaybeUninit::<fdd_freeze_frame>::uninit();
+        assert_eq!(
+            fdd_dtc_freeze_frame(rt, P0123_17, frame.as_mut_ptr(), values.as_mut_ptr(), 8),
+            FDD_OK
+        );
+        let frame = frame.assume_init();
+        assert!(frame.value_count >= 3);
+        let tps = values[..frame.value_count.min(8)]
+            .iter()
+            .find(|v| CStr::from_ptr(v.name.as_ptr()).to_bytes() == b"tps")
+            .expect("tps in the freeze frame");
+        assert_eq!(tps.value, 5.0);
+        let mut cleared = 0;
+        assert_eq!(
+            fdd_clear_dtc(rt, 0xFF_FFFF, 2_000_000_000, &mut cleared),
+            FDD_OK
+        );
+        assert!(cleared >= 1);
+        assert_eq!(fdd_dtc_status(rt, P0123_17, &mut st), FDD_OK);
+        assert_eq!(st, 0x50);
+        fdd_runtime_free(rt);
+    }
+}
