@@ -135,6 +135,35 @@ enum Command {
         #[arg(long)]
         allow_long: bool,
     },
+    /// Convert a CSV log (one row per sample time) to an MCAP log fdd replays, as a mapping
+    /// file says: the time column and its unit, and per output topic the columns it carries
+    /// with their scaling into the field's unit (value = column x scale + offset).
+    ///
+    /// One message per row per topic at the row's time. With a `[truth]` table in the mapping
+    /// every row also gets a ground-truth message: no fault, or `--fault NAME` from
+    /// `--fault-onset-s T` on, so `fdd evaluate` can score the log. Streams the CSV; errors
+    /// name the file, line and column (or the mapping's key). The output may not be the CSV
+    /// or the mapping; it is written whole or not at all, and the same inputs give the same
+    /// bytes. Mappings of the bundled real-engine data: config/import/*.toml.
+    Import {
+        /// The CSV file: a header line with the column names, then one row per sample time.
+        csv: PathBuf,
+        /// The mapping file (TOML; see config/import/ for examples).
+        #[arg(long)]
+        mapping: PathBuf,
+        /// Output MCAP file.
+        #[arg(short, long)]
+        out: PathBuf,
+        /// Mark this fault in the truth topic from --fault-onset-s on (e.g. pim_gain_1.15).
+        #[arg(long, requires = "fault_onset_s")]
+        fault: Option<String>,
+        /// Log time at which the fault starts (s, in the log's time, as the mapping gives it).
+        #[arg(long, requires = "fault", allow_negative_numbers = true, value_parser = |s: &str| fdd::import::FAULT_ONSET.parse(s))]
+        fault_onset_s: Option<f64>,
+        /// No progress bar (it is only drawn when stderr is a terminal anyway).
+        #[arg(long)]
+        no_progress: bool,
+    },
     /// Reproduce a result from one of the source papers.
     Reproduce {
         #[command(subcommand)]
@@ -338,6 +367,25 @@ fn run(command: Command) -> Result<()> {
                 stats.frames,
                 stats.messages
             ))
+        }
+        Command::Import {
+            csv,
+            mapping,
+            out,
+            fault,
+            fault_onset_s,
+            no_progress,
+        } => {
+            let fault = match (fault, fault_onset_s) {
+                (Some(name), Some(onset_s)) => Some(fdd::import::FaultSpec { name, onset_s }),
+                _ => None,
+            };
+            let opts = fdd::import::ImportOptions {
+                fault,
+                progress: !no_progress,
+            };
+            let stats = fdd::import::import(&csv, &mapping, &out, &opts)?;
+            emit(&stats.render(&out, opts.fault.as_ref()))
         }
         Command::Reproduce { what } => match what {
             Reproduce::Table2 {

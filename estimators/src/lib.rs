@@ -10,8 +10,11 @@
 //!   federated filter (information-sharing factors, fusion-reset) that equals the centralized EKF.
 //! - [`particle::ParticleFilter`]: a bootstrap reference estimator (allocates at construction).
 //! - [`models`]: the electronic throttle and a linear model.
+//! - [`dare`]: the discrete algebraic Riccati equation (structure-preserving doubling) and the
+//!   stationary Kalman gains built on it, for observers with constant gains.
 
 pub mod correction;
+pub mod dare;
 pub mod ekf;
 pub mod error;
 pub mod fusion;
