@@ -6,6 +6,7 @@
 pub mod calibrate;
 pub mod config;
 pub mod evaluate;
+pub mod fit;
 pub mod import;
 pub mod limits;
 pub mod paths;

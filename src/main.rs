@@ -164,10 +164,39 @@ enum Command {
         #[arg(long)]
         no_progress: bool,
     },
+    /// Calibrate a plant model's parameters to measured data.
+    Fit {
+        #[command(subcommand)]
+        what: Fit,
+    },
     /// Reproduce a result from one of the source papers.
     Reproduce {
         #[command(subcommand)]
         what: Reproduce,
+    },
+}
+
+#[derive(Subcommand)]
+enum Fit {
+    /// Fit the turbocharged air-path model to the TSFS09 engine, compressor and turbine maps,
+    /// check the whole model's stationary point at every map point, and write a complete
+    /// parameter file (commented with what was fitted from what and the error figures).
+    ///
+    /// Prints the per-quantity error table (all points and the held-out every 5th point). The
+    /// same inputs give the same bytes.
+    Turbo {
+        /// The data directory: engine_map.csv, comp_map.csv, turb_map.csv.
+        #[arg(long)]
+        data: PathBuf,
+        /// The start parameter file (its [model] table; e.g. config/turbo.toml).
+        #[arg(long)]
+        start: PathBuf,
+        /// The output parameter file.
+        #[arg(short, long)]
+        out: PathBuf,
+        /// Print the figures as JSON instead of the table.
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -386,6 +415,28 @@ fn run(command: Command) -> Result<()> {
             };
             let stats = fdd::import::import(&csv, &mapping, &out, &opts)?;
             emit(&stats.render(&out, opts.fault.as_ref()))
+        }
+        Command::Fit {
+            what:
+                Fit::Turbo {
+                    data,
+                    start,
+                    out,
+                    json,
+                },
+        } => {
+            let args = fdd::fit::FitTurboArgs { data, start, out };
+            let run = fdd::fit::run(&args)?;
+            if json {
+                let value = fdd::fit::render::json(&run.outcome, &run.check);
+                emit(&format!("{}\n", serde_json::to_string_pretty(&value)?))
+            } else {
+                emit(&format!(
+                    "wrote {}\n{}",
+                    args.out.display(),
+                    fdd::fit::render::table(&run.check)
+                ))
+            }
         }
         Command::Reproduce { what } => match what {
             Reproduce::Table2 {

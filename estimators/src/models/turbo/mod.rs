@@ -48,7 +48,8 @@
 //! [`turbine`], [`wastegate`], [`shaft`], [`volumes`] (mass and energy balances), [`dynamics`]
 //! (assembled right-hand side), [`stationary`] (operating points by pseudo-transient
 //! continuation), [`discrete`] (the step: SDIRK2 with Newton, and its transition matrix),
-//! [`ad`] (forward-mode automatic differentiation for the exact Jacobians), [`params`].
+//! [`ad`] (forward-mode automatic differentiation for the exact Jacobians), [`params`];
+//! [`fit`] calibrates the parameters to stationary engine-map data (`fdd fit turbo`).
 //!
 //! # Decisions where REFERENCE §4 is ambiguous
 //!
@@ -88,6 +89,7 @@ pub mod compressor;
 pub mod cylinder;
 pub mod discrete;
 pub mod dynamics;
+pub mod fit;
 pub mod nozzle;
 pub mod params;
 pub mod restriction;
