@@ -410,17 +410,7 @@ fn the_imported_truth_is_read_by_fdd_replay() {
 
 #[test]
 fn official_python_reader_accepts_the_converted_fixtures() {
-    let have_python_mcap = Command::new("python3")
-        .args(["-c", "import mcap.reader"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if !have_python_mcap {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI is set but python3 cannot import mcap"
-        );
-        println!("skipped: python3 with the 'mcap' package is not available (pip install mcap jsonschema)");
+    if !fdd_testkit::python_modules_available("mcap.reader") {
         return;
     }
     let files: Vec<PathBuf> = recipes().iter().map(Recipe::mcap).collect();

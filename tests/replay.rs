@@ -654,17 +654,7 @@ fn intake_replay_output_passes_the_official_reader() {
         vec!["centralized_ekf", "maf_local_ekf"],
         "switch on the MAP fault"
     );
-    let available = Command::new("python3")
-        .args(["-c", "import mcap.reader, jsonschema"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if !available {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI must have the Python mcap reader (pip install mcap jsonschema)"
-        );
-        eprintln!("python3 with mcap/jsonschema not found: official-reader check skipped");
+    if !fdd_testkit::python_modules_available("mcap.reader, jsonschema") {
         return;
     }
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/check_mcap.py");

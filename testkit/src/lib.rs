@@ -89,3 +89,22 @@ pub fn mutate(mut bytes: Vec<u8>, how: u8, at: usize, byte: u8) -> Vec<u8> {
     }
     bytes
 }
+
+/// Whether `python3` can import `modules` (e.g. `"mcap.reader, jsonschema"`), for the tests
+/// that cross-check fdd's files with the official Python readers. Without them the caller
+/// skips its check, except under CI (`CI` set), where their absence fails the test: CI
+/// installs them (`.ci/run`), so a skip there would hide a missing check.
+pub fn python_modules_available(modules: &str) -> bool {
+    let found = std::process::Command::new("python3")
+        .args(["-c", &format!("import {modules}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !found {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI is set but python3 cannot import {modules} (pip install mcap jsonschema)"
+        );
+        eprintln!("skipped: python3 cannot import {modules} (pip install mcap jsonschema)");
+    }
+    found
+}
