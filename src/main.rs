@@ -198,6 +198,28 @@ enum Fit {
         #[arg(long)]
         json: bool,
     },
+    /// Fit the turbocharged air-path model to a fault-free driving log of the LiU-ICE engine
+    /// (volumetric efficiency, throttle area, the turbine flow constant from the boost, the
+    /// sensors' noise), judge it on other fault-free logs, and write a complete parameter file.
+    ///
+    /// Prints the figures per log. The same inputs give the same bytes.
+    TurboIce {
+        /// The calibration log (MCAP, fault-free, topics of config/import/liu_ice.toml).
+        #[arg(long)]
+        log: PathBuf,
+        /// Another fault-free log to judge the fit on (repeatable); never fitted.
+        #[arg(long)]
+        judge: Vec<PathBuf>,
+        /// The start parameter file (its [model] table; e.g. config/turbo_vep4.toml).
+        #[arg(long)]
+        start: PathBuf,
+        /// The output parameter file.
+        #[arg(short, long)]
+        out: PathBuf,
+        /// Print the figures as JSON instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 #[derive(Subcommand)]
@@ -435,6 +457,34 @@ fn run(command: Command) -> Result<()> {
                     "wrote {}\n{}",
                     args.out.display(),
                     fdd::fit::render::table(&run.check)
+                ))
+            }
+        }
+        Command::Fit {
+            what:
+                Fit::TurboIce {
+                    log,
+                    judge,
+                    start,
+                    out,
+                    json,
+                },
+        } => {
+            let args = fdd::fit::ice::FitIceArgs {
+                log,
+                judge,
+                start,
+                out,
+            };
+            let run = fdd::fit::ice::run(&args)?;
+            if json {
+                let value = fdd::fit::ice::json(&run);
+                emit(&format!("{}\n", serde_json::to_string_pretty(&value)?))
+            } else {
+                emit(&format!(
+                    "wrote {}\n{}",
+                    args.out.display(),
+                    fdd::fit::ice::table(&run.checks)
                 ))
             }
         }

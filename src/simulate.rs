@@ -1,12 +1,19 @@
 //! `fdd simulate`: scenario file (throttle or intake) -> truth simulation with sensors and an
 //! injected fault -> MCAP.
+//!
+//! Turbo scenarios (`monitor = "turbo"`, [`fdd_fixtures::turbo_scenario`]) take their own
+//! branch ([`simulate_turbo`]): a file, a bundled turbo fixture's name (`turbo_leak_ic`), a
+//! directory of turbo scenario files, or a generated set (`turbo_tuning`, `turbo_heldout`);
+//! a directory or a set is written as one log per scenario into the `-o` directory.
 
 use std::path::{Path, PathBuf};
 
 use fdd_fixtures::scenario::ScenarioError;
 use fdd_fixtures::scenario_file::{AnyScenario, AnySim, FixtureError};
 use fdd_fixtures::throttle_log::{LogStats, FIXTURE_WRITE_OPTIONS};
-use fdd_fixtures::{intake_log, throttle_log};
+use fdd_fixtures::turbo_scenario::{SetKind, TurboScenario};
+use fdd_fixtures::turbo_sim::{TurboSim, TurboSimError};
+use fdd_fixtures::{intake_log, throttle_log, turbo_log, turbo_scenario};
 use fdd_monitor::log::{LogError, LogWriter};
 
 /// Longest simulation `fdd simulate` (and `evaluate`, `calibrate` on scenario files) runs
@@ -48,6 +55,17 @@ pub enum SimulateError {
     Fixture(#[from] FixtureError),
     #[error(transparent)]
     Log(#[from] LogError),
+    #[error(transparent)]
+    TurboSim(#[from] TurboSimError),
+    #[error("{}: cannot create the output directory: {source}", out.display())]
+    OutputDir {
+        out: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: no turbo scenario file (monitor = \"turbo\") in this directory", dir.display())]
+    NoTurboScenarios { dir: PathBuf },
+    #[error("{}: refusing to write the logs of several scenarios into a .mcap path: give -o a directory", out.display())]
+    OutputNotDirectory { out: PathBuf },
 }
 
 /// Where a scenario was found.
@@ -128,6 +146,32 @@ pub fn list_bundled() -> Result<String, SimulateError> {
             sc.duration_s()
         );
     }
+    for (name, text) in turbo_scenario::BUNDLED {
+        let sc = TurboScenario::parse(text, name)?;
+        let fault = match sc.fault.fault {
+            fdd_fixtures::turbo_faults::TurboFault::None => "none".to_string(),
+            f => format!("{} from {} s", f.truth_name(), sc.fault.start_s),
+        };
+        let _ = writeln!(
+            out,
+            "{:<28} {:<8} {:>8} s  {fault}",
+            name, "turbo", sc.duration_s
+        );
+    }
+    let _ = writeln!(
+        out,
+        "{:<28} {:<8} {:>10}  generated set: -o names a directory",
+        SetKind::Tuning.name(),
+        "turbo",
+        ""
+    );
+    let _ = writeln!(
+        out,
+        "{:<28} {:<8} {:>10}  generated set: -o names a directory",
+        SetKind::HeldOut.name(),
+        "turbo",
+        ""
+    );
     Ok(out)
 }
 
@@ -135,6 +179,24 @@ pub fn list_bundled() -> Result<String, SimulateError> {
 /// [`MAX_SIMULATE_S`] and `opts.allow_long` is not set (what [`simulate`] checks first), without
 /// simulating it.
 pub fn check_length(scenario: &Path, opts: &SimulateOptions) -> Result<(), SimulateError> {
+    if let Some(turbo) = find_turbo(&scenario.to_string_lossy())? {
+        let list = match turbo {
+            TurboInput::One {
+                scenario, origin, ..
+            } => vec![(*scenario, origin)],
+            TurboInput::Many(list) => list,
+        };
+        for (sc, origin) in list {
+            if sc.duration_s > MAX_SIMULATE_S && !opts.allow_long {
+                return Err(SimulateError::TooLong {
+                    origin,
+                    duration_s: sc.duration_s,
+                    max_s: MAX_SIMULATE_S,
+                });
+            }
+        }
+        return Ok(());
+    }
     let (sc, source) = find_scenario(&scenario.to_string_lossy())?;
     if sc.duration_s() > MAX_SIMULATE_S && !opts.allow_long {
         return Err(SimulateError::TooLong {
@@ -160,6 +222,9 @@ pub fn simulate(
     out: &Path,
     opts: &SimulateOptions,
 ) -> Result<LogStats, SimulateError> {
+    if let Some(turbo) = find_turbo(scenario)? {
+        return simulate_turbo(turbo, out, opts);
+    }
     let (sc, source) = find_scenario(scenario)?;
     if let ScenarioSource::File(f) = &source {
         if crate::paths::same_file(f, out) {
@@ -192,4 +257,199 @@ pub fn simulate(
         AnySim::Intake(sim) => intake_log::write_log(*sim, writer)?,
     };
     Ok(stats)
+}
+
+/// Turbo scenarios found for an argument of `fdd simulate`.
+#[derive(Debug)]
+pub enum TurboInput {
+    /// One scenario (a file or a bundled fixture), with how errors name it and its file.
+    One {
+        scenario: Box<TurboScenario>,
+        origin: String,
+        file: Option<PathBuf>,
+    },
+    /// Several (a directory or a generated set): one log each, into a directory.
+    Many(Vec<(TurboScenario, String)>),
+}
+
+/// The turbo scenarios `arg` names, if it names any: a generated set's name
+/// ([`SetKind::parse`]), a directory (its `.toml` files that say `monitor = "turbo"`), a file
+/// (or the name with `.toml`) that says `monitor = "turbo"`, or a bundled turbo fixture's name.
+/// `None` for everything else (throttle and intake scenarios take the other branch).
+pub fn find_turbo(arg: &str) -> Result<Option<TurboInput>, SimulateError> {
+    let path = Path::new(arg);
+    if path.is_dir() {
+        let origin = path.display().to_string();
+        let read_err = |source| ScenarioError::Read {
+            origin: origin.clone(),
+            source,
+        };
+        let mut files = Vec::new();
+        for entry in std::fs::read_dir(path).map_err(read_err)? {
+            let p = entry.map_err(read_err)?.path();
+            if p.extension().is_some_and(|e| e == "toml") {
+                files.push(p);
+            }
+        }
+        files.sort();
+        let mut many = Vec::new();
+        for f in files {
+            let text = fdd_monitor::text_file::read_text(&f).map_err(ScenarioError::from)?;
+            if turbo_scenario::is_turbo_text(&text) {
+                many.push((TurboScenario::load(&f)?, f.display().to_string()));
+            }
+        }
+        if many.is_empty() {
+            return Err(SimulateError::NoTurboScenarios { dir: path.into() });
+        }
+        return Ok(Some(TurboInput::Many(many)));
+    }
+    let with_ext = PathBuf::from(format!("{arg}.toml"));
+    for f in [path, with_ext.as_path()] {
+        if f.is_file() {
+            let text = fdd_monitor::text_file::read_text(f).map_err(ScenarioError::from)?;
+            if !turbo_scenario::is_turbo_text(&text) {
+                return Ok(None);
+            }
+            return Ok(Some(TurboInput::One {
+                scenario: Box::new(TurboScenario::load(f)?),
+                origin: f.display().to_string(),
+                file: Some(f.to_path_buf()),
+            }));
+        }
+    }
+    if let Some(kind) = SetKind::parse(arg) {
+        let many = turbo_scenario::generate_set(kind)
+            .into_iter()
+            .map(|sc| {
+                let origin = format!("generated set {} scenario {}", kind.name(), sc.name);
+                (sc, origin)
+            })
+            .collect();
+        return Ok(Some(TurboInput::Many(many)));
+    }
+    if let Some((name, text)) = turbo_scenario::BUNDLED.iter().find(|(n, _)| *n == arg) {
+        let origin = format!("bundled scenario {name}");
+        return Ok(Some(TurboInput::One {
+            scenario: Box::new(TurboScenario::parse(text, &origin)?),
+            origin,
+            file: None,
+        }));
+    }
+    Ok(None)
+}
+
+/// Simulates one turbo scenario into the log `out`.
+fn simulate_one_turbo(
+    sc: &TurboScenario,
+    origin: &str,
+    out: &Path,
+    opts: &SimulateOptions,
+) -> Result<LogStats, SimulateError> {
+    if sc.duration_s > MAX_SIMULATE_S && !opts.allow_long {
+        return Err(SimulateError::TooLong {
+            origin: origin.to_string(),
+            duration_s: sc.duration_s,
+            max_s: MAX_SIMULATE_S,
+        });
+    }
+    // Built before the output is created, so a scenario the simulator refuses leaves no file.
+    let sim = TurboSim::from_scenario(sc, origin)?;
+    let writer = LogWriter::create_with(out, FIXTURE_WRITE_OPTIONS)?;
+    let (_, stats) = turbo_log::write_log(sim, writer)?;
+    Ok(stats)
+}
+
+/// The turbo branch of [`simulate`]: one scenario into the log `out` (the same refusals as
+/// the other monitors' scenarios), or several into the directory `out` (created if needed),
+/// as `out/<name>.mcap`, simulated in parallel on the machine's cores; the stats are summed.
+pub fn simulate_turbo(
+    input: TurboInput,
+    out: &Path,
+    opts: &SimulateOptions,
+) -> Result<LogStats, SimulateError> {
+    match input {
+        TurboInput::One {
+            scenario,
+            origin,
+            file,
+        } => {
+            if let Some(f) = &file {
+                if crate::paths::same_file(f, out) {
+                    return Err(SimulateError::OutputIsScenario {
+                        out: out.to_path_buf(),
+                    });
+                }
+            }
+            if out
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+            {
+                return Err(SimulateError::OutputIsToml {
+                    out: out.to_path_buf(),
+                });
+            }
+            simulate_one_turbo(&scenario, &origin, out, opts)
+        }
+        TurboInput::Many(list) => {
+            if out
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("mcap") || e.eq_ignore_ascii_case("toml"))
+            {
+                return Err(SimulateError::OutputNotDirectory {
+                    out: out.to_path_buf(),
+                });
+            }
+            for (sc, origin) in &list {
+                if sc.duration_s > MAX_SIMULATE_S && !opts.allow_long {
+                    return Err(SimulateError::TooLong {
+                        origin: origin.clone(),
+                        duration_s: sc.duration_s,
+                        max_s: MAX_SIMULATE_S,
+                    });
+                }
+            }
+            std::fs::create_dir_all(out).map_err(|source| SimulateError::OutputDir {
+                out: out.to_path_buf(),
+                source,
+            })?;
+            let workers = std::thread::available_parallelism()
+                .map_or(1, |n| n.get())
+                .min(list.len().max(1));
+            let next = std::sync::atomic::AtomicUsize::new(0);
+            let results: Vec<Result<LogStats, SimulateError>> = std::thread::scope(|scope| {
+                let handles: Vec<_> = (0..workers)
+                    .map(|_| {
+                        scope.spawn(|| {
+                            let mut mine = Vec::new();
+                            loop {
+                                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                                let Some((sc, origin)) = list.get(i) else {
+                                    break;
+                                };
+                                tracing::info!("[{}/{}] {}", i + 1, list.len(), sc.name);
+                                let file = out.join(format!("{}.mcap", sc.name));
+                                mine.push(simulate_one_turbo(sc, origin, &file, opts));
+                            }
+                            mine
+                        })
+                    })
+                    .collect();
+                handles
+                    .into_iter()
+                    .flat_map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+                    .collect()
+            });
+            let mut total = LogStats {
+                frames: 0,
+                messages: 0,
+            };
+            for r in results {
+                let s = r?;
+                total.frames += s.frames;
+                total.messages += s.messages;
+            }
+            Ok(total)
+        }
+    }
 }

@@ -84,21 +84,20 @@ fn command_reproduces_the_committed_file_and_meets_the_figures() {
             pct(set, "p_em")
         );
     }
-    // Targets that hold (all points and held out): intake manifold and intercooler pressure
-    // within 3 % of their means. Targets that do not (see the report in
-    // config/turbo_tsfs09.toml and estimators/src/models/turbo/fit/components.rs): the air
-    // flow (5.0 %: the model's volumetric efficiency depends on p_im only, the data's also on
-    // the speed) and p_em (8.3 %: the turbine flow form cannot follow the measured exhaust
-    // flow parameter). Those are asserted at their achieved values so that a regression fails.
-    for set in ["all", "held_out"] {
-        assert!(pct(set, "p_im") <= 3.0, "{set} p_im {}", pct(set, "p_im"));
-        assert!(pct(set, "p_ic") <= 3.0, "{set} p_ic {}", pct(set, "p_ic"));
+    // The targets, on all 344 points: p_im, p_ic and the air flow within 3 % of their
+    // means, p_em within 5 % (the held-out figures are printed above; nothing was chosen on
+    // them).
+    for (q, target) in [
+        ("p_im", 3.0),
+        ("p_ic", 3.0),
+        ("m_dot_at", 3.0),
+        ("p_em", 5.0),
+    ] {
         assert!(
-            pct(set, "m_dot_at") <= 5.5,
-            "{set} m_dot_at {}",
-            pct(set, "m_dot_at")
+            pct("all", q) <= target,
+            "all points: {q} {} %",
+            pct("all", q)
         );
-        assert!(pct(set, "p_em") <= 9.0, "{set} p_em {}", pct(set, "p_em"));
     }
 }
 
@@ -115,6 +114,15 @@ fn truth() -> TurboParams {
 /// 100 kPa and 298 K, with Gaussian noise (0.1 % on pressures, 0.3 K on temperatures, 0.5 %
 /// on the air flow), as engine-map points.
 fn synthetic_points(p: &TurboParams, seed: u64) -> Vec<EnginePoint> {
+    synthetic_points_wastegate(p, seed, |_| 0.0)
+}
+
+/// [`synthetic_points`] with the wastegate of the `i`-th point at `wastegate(i)`.
+fn synthetic_points_wastegate(
+    p: &TurboParams,
+    seed: u64,
+    wastegate: impl Fn(usize) -> f64,
+) -> Vec<EnginePoint> {
     let model = TurboModel::new(p.clone()).expect("valid");
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let n = Normal::new(0.0, 1.0).expect("normal");
@@ -125,7 +133,7 @@ fn synthetic_points(p: &TurboParams, seed: u64) -> Vec<EnginePoint> {
                 let u = TurboInput {
                     throttle_pct: thr,
                     engine_speed_rad_s: rpm / 60.0 * 2.0 * std::f64::consts::PI,
-                    wastegate_frac: 0.0,
+                    wastegate_frac: wastegate(out.len()),
                     lambda,
                     ambient_pressure_pa: 100_000.0,
                     ambient_temperature_k: 298.0,
@@ -208,8 +216,11 @@ fn component_fits_recover_the_model_parameters_from_its_own_noisy_data() {
     // The truth's factor is 0.8 at every p_im: the fitted polynomial must be too.
     let ve = fit_vol_eff(&pts, &start).expect("volumetric efficiency");
     for kpa in [40.0, 80.0, 120.0] {
-        let v = ve.poly_kpa.iter().fold(0.0, |acc, c| acc * kpa + c);
-        close(v, t.vol_eff_factor, 0.02, "volumetric efficiency factor");
+        for n in [1.0, 2.6, 4.2] {
+            let [s1, s2] = ve.speed_coeffs_krpm;
+            let v = ve.poly_kpa.iter().fold(0.0, |acc, c| acc * kpa + c) + s1 * n + s2 * n * n;
+            close(v, t.vol_eff_factor, 0.02, "volumetric efficiency factor");
+        }
     }
 
     let mut thr_start = start.clone();
@@ -250,24 +261,108 @@ fn component_fits_recover_the_model_parameters_from_its_own_noisy_data() {
         0.03,
         "intercooler effectiveness",
     );
+}
 
-    let mut tu_start = t.clone();
-    tu_start.turbine_flow_k1_kg_k05_per_s_kpa = 0.03;
-    tu_start.turbine_efficiency_max = 0.5;
-    let mut opts = FitOptions::tsfs09();
-    opts.closed_wastegate_boost_ratio = 1.05;
-    let tu = fit_turbine(&pts, &tu_start, &opts).expect("turbine");
-    close(
-        tu.k1.value,
-        t.turbine_flow_k1_kg_k05_per_s_kpa,
-        0.02,
-        "turbine k1",
+#[test]
+fn volumetric_efficiency_fit_recovers_a_speed_dependence() {
+    // A truth whose factor depends on p_im and on the speed: 0.75 + 0.002 p_im[kPa] - 0.000005
+    // p_im^2 + 0.05 n - 0.008 n^2 (n in 1000 rpm), unclamped over the points (1 to 400 kPa).
+    let mut t = truth();
+    t.vol_eff_factor = 1.0;
+    t.vol_eff_poly_kpa = [0.0, 0.0, -5e-6, 2e-3, 0.75];
+    t.vol_eff_poly_min_kpa = 1.0;
+    t.vol_eff_poly_max_kpa = 400.0;
+    t.vol_eff_speed_coeffs_krpm = [0.05, -0.008];
+    t.vol_eff_speed_min_krpm = 0.5;
+    t.vol_eff_speed_max_krpm = 5.0;
+    t.validate().expect("valid truth");
+    let pts = synthetic_points(&t, 11);
+    let ve = fit_vol_eff(&pts, &t).expect("volumetric efficiency");
+    let factor = |poly: &[f64; 5], s: [f64; 2], kpa: f64, n: f64| {
+        poly.iter().fold(0.0, |acc, c| acc * kpa + c) + s[0] * n + s[1] * n * n
+    };
+    // At the points' own manifold pressures and speeds (the domain the data cover).
+    let mut worst = 0.0f64;
+    let mut sq = 0.0;
+    for p in &pts {
+        let (kpa, n) = (p.p_im_pa / 1000.0, p.engine_speed_rev_s * 60.0 / 1000.0);
+        let want = factor(
+            &t.vol_eff_poly_kpa,
+            t.vol_eff_speed_coeffs_krpm,
+            kpa.clamp(t.vol_eff_poly_min_kpa, t.vol_eff_poly_max_kpa),
+            n,
+        );
+        let got = factor(
+            &ve.poly_kpa,
+            ve.speed_coeffs_krpm,
+            kpa.clamp(ve.min_kpa, ve.max_kpa),
+            n,
+        );
+        worst = worst.max((got / want - 1.0).abs());
+        sq += (got / want - 1.0).powi(2);
+    }
+    let rms = (sq / pts.len() as f64).sqrt();
+    println!("factor error: RMS {rms}, worst {worst}");
+    assert!(
+        rms < 0.005 && worst < 0.01,
+        "relative factor error RMS {rms}, worst {worst}"
     );
+    // The speed terms themselves, not only their sum with the polynomial: the truth's
+    // speed part changes the factor by 0.033 between 1000 and 4200 rpm at any p_im.
+    let part = |s: [f64; 2], n: f64| s[0] * n + s[1] * n * n;
     close(
-        tu.efficiency_max.value,
-        t.turbine_efficiency_max,
-        0.05,
-        "turbine eta_max",
+        part(ve.speed_coeffs_krpm, 4.2) - part(ve.speed_coeffs_krpm, 1.0),
+        part(t.vol_eff_speed_coeffs_krpm, 4.2) - part(t.vol_eff_speed_coeffs_krpm, 1.0),
+        0.15,
+        "speed part between 1000 and 4200 rpm",
+    );
+    // The speed range is the points' (1000 to 4200 rpm), rounded outwards to 0.1.
+    assert_eq!((ve.speed_min_krpm, ve.speed_max_krpm), (1.0, 4.2));
+}
+
+#[test]
+fn turbine_fit_recovers_the_turbine_flow_whatever_the_wastegate_passes() {
+    // A truth whose turbine flow is linear in 1 - Pi_t over the whole range (its continuation
+    // from 0.3), run with the wastegate half open at every other point: the fit must find the
+    // turbine's flow from the power balance, not the whole exhaust flow.
+    let mut t = truth();
+    t.turbine_linear_ratio = 0.3;
+    t.validate().expect("valid truth");
+    let pts = synthetic_points_wastegate(&t, 5, |i| if i % 2 == 0 { 0.0 } else { 0.5 });
+    let mut start = t.clone();
+    start.turbine_flow_k1_kg_k05_per_s_kpa = 0.05;
+    let tu = fit_turbine(&pts, &start).expect("turbine");
+    assert!(tu.points >= 10, "{} points used", tu.points);
+    let mut fitted = t.clone();
+    fitted.turbine_flow_k1_kg_k05_per_s_kpa = tu.k1.value;
+    fitted.turbine_linear_ratio = tu.linear_ratio;
+    let flow = |q: &TurboParams, p: &EnginePoint| {
+        let m = TurboModel::new(q.clone()).expect("valid");
+        let x = m.state_from_pressures(
+            [
+                p.p_af_pa, p.p_ic_pa, p.p_ic_pa, p.p_im_pa, p.p_em_pa, p.p_t_pa,
+            ],
+            [p.t_af_k, p.t_ic_k, p.t_ic_k, p.t_im_k, p.t_em_k, p.t_t_k],
+            1e4,
+        );
+        let u = TurboInput {
+            throttle_pct: 50.0,
+            engine_speed_rad_s: 300.0,
+            wastegate_frac: 0.0,
+            lambda: 1.0,
+            ambient_pressure_pa: 100_000.0,
+            ambient_temperature_k: 298.0,
+        };
+        m.signals(&x, &u).w_t_kg_s
+    };
+    for p in pts.iter().filter(|p| p.p_em_pa > 1.1 * p.p_t_pa) {
+        close(flow(&fitted, p), flow(&t, p), 0.03, "turbine flow");
+    }
+    // Half the points bypass part of the exhaust: the fit says so.
+    assert!(
+        tu.bypass_share.0 > 0.05 && tu.bypass_share.1 > 0.2,
+        "bypass {:?}",
+        tu.bypass_share
     );
 }
 

@@ -134,6 +134,62 @@ pub const INTAKE: &[FaultType] = &[
     },
 ];
 
+/// The turbo air-path monitor's diagnosis classes and events (DTCs) that each fault of
+/// `fdd_fixtures::turbo_faults` counts as: P0106 (`turbo_p_im_range_performance`), P0236
+/// (`turbo_p_ic_range_performance`), P0101 (`turbo_maf_range_performance`), P0096
+/// (`turbo_t_ic_range_performance`), P2279 (`turbo_intake_leak`, both leaks), the P0243 family
+/// with P0299 / P0234 (`turbo_wastegate`, `turbo_underboost`, `turbo_overboost`: a stuck
+/// wastegate shows as under- or overboost) and the throttle actuator (`turbo_throttle_actuator`).
+/// The simulator's truth names carry the size (`pim_gain_1.10`, `leak_ic_5mm`, as the imported
+/// LiU-ICE faults' `pim_gain_1.15`); every name it can write is listed, on its size grid.
+const TURBO_P_IM_DTCS: &[&str] = &["turbo_p_im_range_performance"];
+const TURBO_P_IC_DTCS: &[&str] = &["turbo_p_ic_range_performance"];
+const TURBO_MAF_DTCS: &[&str] = &["turbo_maf_range_performance"];
+const TURBO_T_IC_DTCS: &[&str] = &["turbo_t_ic_range_performance"];
+const TURBO_LEAK_DTCS: &[&str] = &["turbo_intake_leak"];
+const TURBO_WASTEGATE_DTCS: &[&str] = &["turbo_wastegate", "turbo_underboost", "turbo_overboost"];
+const TURBO_THROTTLE_DTCS: &[&str] = &["turbo_throttle_actuator"];
+
+const fn turbo(
+    truth: &'static str,
+    class: &'static [&'static str],
+    dtcs: &'static [&'static str],
+) -> FaultType {
+    FaultType {
+        truth,
+        scored_as: class,
+        dtcs,
+    }
+}
+
+/// The table of sized names: `prefix, class, dtcs; [sizes]` per family, then the unsized ones.
+macro_rules! turbo_table {
+    ($( $prefix:literal, $class:literal, $dtcs:expr; [$($size:literal),*] );* ; fixed: $( $name:literal, $fclass:literal, $fdtcs:expr );* $(;)?) => {
+        &[
+            $( $( turbo(concat!($prefix, $size), &[$class], $dtcs), )* )*
+            $( turbo($name, &[$fclass], $fdtcs), )*
+        ]
+    };
+}
+
+/// The turbo faults of `fdd_fixtures::turbo_faults` (every truth name on the size grid, and the
+/// imported LiU-ICE faults' names, which are on it: `pim_gain_1.15`, `pic_gain_0.85`,
+/// `waf_gain_1.05`, ...).
+pub const TURBO: &[FaultType] = turbo_table!(
+    "pim_gain_", "turbo_p_im_sensor", TURBO_P_IM_DTCS; ["0.80", "0.81", "0.82", "0.83", "0.84", "0.85", "0.86", "0.87", "0.88", "0.89", "0.90", "0.91", "0.92", "0.93", "0.94", "0.95", "1.05", "1.06", "1.07", "1.08", "1.09", "1.10", "1.11", "1.12", "1.13", "1.14", "1.15", "1.16", "1.17", "1.18", "1.19", "1.20"];
+    "pic_gain_", "turbo_p_ic_sensor", TURBO_P_IC_DTCS; ["0.80", "0.81", "0.82", "0.83", "0.84", "0.85", "0.86", "0.87", "0.88", "0.89", "0.90", "0.91", "0.92", "0.93", "0.94", "0.95", "1.05", "1.06", "1.07", "1.08", "1.09", "1.10", "1.11", "1.12", "1.13", "1.14", "1.15", "1.16", "1.17", "1.18", "1.19", "1.20"];
+    "waf_gain_", "turbo_maf_sensor", TURBO_MAF_DTCS; ["0.80", "0.81", "0.82", "0.83", "0.84", "0.85", "0.86", "0.87", "0.88", "0.89", "0.90", "0.91", "0.92", "0.93", "0.94", "0.95", "1.05", "1.06", "1.07", "1.08", "1.09", "1.10", "1.11", "1.12", "1.13", "1.14", "1.15", "1.16", "1.17", "1.18", "1.19", "1.20"];
+    "tic_bias_", "turbo_t_ic_sensor", TURBO_T_IC_DTCS; ["-20K", "-19K", "-18K", "-17K", "-16K", "-15K", "-14K", "-13K", "-12K", "-11K", "-10K", "-9K", "-8K", "-7K", "-6K", "-5K", "-4K", "-3K", "-2K", "2K", "3K", "4K", "5K", "6K", "7K", "8K", "9K", "10K", "11K", "12K", "13K", "14K", "15K", "16K", "17K", "18K", "19K", "20K"];
+    "leak_ic_", "turbo_leak_before_throttle", TURBO_LEAK_DTCS; ["1mm", "2mm", "3mm", "4mm", "5mm", "6mm", "7mm", "8mm", "9mm", "10mm", "11mm", "12mm"];
+    "leak_im_", "turbo_leak_after_throttle", TURBO_LEAK_DTCS; ["1mm", "2mm", "3mm", "4mm", "5mm", "6mm", "7mm", "8mm", "9mm", "10mm", "11mm", "12mm"];
+    fixed:
+    "wg_stuck", "turbo_wastegate", TURBO_WASTEGATE_DTCS;
+    "wg_stuck_closed", "turbo_wastegate", TURBO_WASTEGATE_DTCS;
+    "wg_stuck_open", "turbo_wastegate", TURBO_WASTEGATE_DTCS;
+    "throttle_stuck", "turbo_throttle_actuator", TURBO_THROTTLE_DTCS;
+    "throttle_sluggish", "turbo_throttle_actuator", TURBO_THROTTLE_DTCS;
+);
+
 /// The intake monitor's group events: detected, not isolated (their isolation candidates name
 /// the fault classes still possible).
 pub const INTAKE_GROUP_EVENTS: &[&str] = &["intake_air_path_group"];
@@ -152,6 +208,7 @@ pub fn fault_types(monitor: &str) -> &'static [FaultType] {
     match monitor {
         "throttle" => THROTTLE,
         "intake" => INTAKE,
+        "turbo" => TURBO,
         _ => &[],
     }
 }
@@ -159,6 +216,29 @@ pub fn fault_types(monitor: &str) -> &'static [FaultType] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The turbo table lists exactly the names the turbo simulator can write (and so the
+    /// imported LiU-ICE faults' names, which are on its grid).
+    #[test]
+    fn the_turbo_table_lists_every_simulated_fault_name() {
+        let names: Vec<String> = fdd_fixtures::turbo_faults::all_fault_names()
+            .into_iter()
+            .filter(|n| n != "none")
+            .collect();
+        let table: Vec<&str> = TURBO.iter().map(|t| t.truth).collect();
+        assert_eq!(names.len(), table.len());
+        for n in &names {
+            assert!(table.contains(&n.as_str()), "{n} missing from TURBO");
+        }
+        for real in [
+            "pim_gain_1.15",
+            "pic_gain_0.85",
+            "waf_gain_0.90",
+            "pim_gain_1.05",
+        ] {
+            assert!(table.contains(&real), "{real}");
+        }
+    }
 
     /// Every class and DTC the table names is one the monitors have, so that a renamed event
     /// cannot silently make every DTC "wrong".

@@ -1,4 +1,4 @@
-//! `fdd fit turbo`: calibrates the turbocharged air-path model to the stationary TSFS09 engine
+//! `fdd fit turbo` (and `fdd fit turbo-ice`, in [`ice`]): calibrates the turbocharged air-path model to the stationary TSFS09 engine
 //! map and its compressor and turbine maps, checks the whole model at every map point and
 //! writes a complete, commented parameter file.
 //!
@@ -8,6 +8,7 @@
 //! same bytes (the fits and the check run in a fixed order on one thread, and every number is
 //! written in Rust's shortest round-trip form or a fixed number of decimals).
 
+pub mod ice;
 pub mod render;
 
 use std::path::{Path, PathBuf};
@@ -114,6 +115,35 @@ pub enum FitIoError {
     OutputIsInput {
         /// The output.
         file: PathBuf,
+    },
+    /// A log cannot be read.
+    #[error("{source}")]
+    Log {
+        /// The log.
+        file: PathBuf,
+        /// The reader's error (it names the file).
+        #[source]
+        source: Box<fdd_monitor::log::LogError>,
+    },
+    /// A log lacks a topic the fit needs.
+    #[error("{}: no message on topic `{topic}` (field `{field}`), which the fit needs", file.display())]
+    MissingTopic {
+        /// The log.
+        file: PathBuf,
+        /// The topic.
+        topic: &'static str,
+        /// Its field.
+        field: &'static str,
+    },
+    /// A log has too few rows with every signal.
+    #[error("{}: {rows} rows with every signal, at least {need} needed", file.display())]
+    TooFewRows {
+        /// The log.
+        file: PathBuf,
+        /// Complete rows.
+        rows: usize,
+        /// Needed.
+        need: usize,
     },
     /// A fit or the check failed.
     #[error(transparent)]
@@ -330,7 +360,7 @@ pub fn run(args: &FitTurboArgs) -> Result<FitRun, FitIoError> {
     })
 }
 
-fn write_atomic(path: &Path, text: &str) -> Result<(), FitIoError> {
+pub(crate) fn write_atomic(path: &Path, text: &str) -> Result<(), FitIoError> {
     use std::io::Write as _;
     let err = |source| FitIoError::Write {
         file: path.to_path_buf(),

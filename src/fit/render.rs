@@ -11,13 +11,13 @@ use fdd_estimators::models::turbo::fit::{
 use fdd_estimators::models::turbo::TurboParams;
 
 /// A key's value: a number or an array.
-enum Value {
+pub(crate) enum Value {
     Num(f64),
     Arr(Vec<f64>),
 }
 
 /// Every key of the `[model]` table, in the order of `config/turbo.toml`.
-fn entries(p: &TurboParams) -> Vec<(&'static str, Value)> {
+pub(crate) fn entries(p: &TurboParams) -> Vec<(&'static str, Value)> {
     use Value::{Arr, Num};
     vec![
         (
@@ -110,6 +110,12 @@ fn entries(p: &TurboParams) -> Vec<(&'static str, Value)> {
         ("vol_eff_poly_kpa", Arr(p.vol_eff_poly_kpa.to_vec())),
         ("vol_eff_poly_min_kpa", Num(p.vol_eff_poly_min_kpa)),
         ("vol_eff_poly_max_kpa", Num(p.vol_eff_poly_max_kpa)),
+        (
+            "vol_eff_speed_coeffs_krpm",
+            Arr(p.vol_eff_speed_coeffs_krpm.to_vec()),
+        ),
+        ("vol_eff_speed_min_krpm", Num(p.vol_eff_speed_min_krpm)),
+        ("vol_eff_speed_max_krpm", Num(p.vol_eff_speed_max_krpm)),
         ("exhaust_temp_zero_flow_k", Num(p.exhaust_temp_zero_flow_k)),
         (
             "exhaust_temp_flow_gain_k_s_per_kg",
@@ -168,12 +174,23 @@ fn entries(p: &TurboParams) -> Vec<(&'static str, Value)> {
 
 /// A number in Rust's shortest round-trip form, which TOML reads back to the same `f64`
 /// (always with a `.` or an exponent, so it stays a float).
-fn num(v: f64) -> String {
+pub(crate) fn num(v: f64) -> String {
     let s = format!("{v:?}");
     if s.contains('.') || s.contains('e') || s.contains("inf") || s.contains("NaN") {
         s
     } else {
         format!("{s}.0")
+    }
+}
+
+/// A value as TOML text.
+pub(crate) fn value_text(v: &Value) -> String {
+    match v {
+        Value::Num(v) => num(*v),
+        Value::Arr(a) => format!(
+            "[{}]",
+            a.iter().map(|v| num(*v)).collect::<Vec<_>>().join(", ")
+        ),
     }
 }
 
@@ -252,8 +269,8 @@ fn note(key: &str, o: &FitOutcome, opts: &FitOptions) -> Vec<String> {
             r.compressor.rms_phi
         )],
         "compressor_flow_max" => vec![],
-        "compressor_head_linear_fraction" | "compressor_efficiency_min" | "throttle_linear_ratio"
-        | "turbine_linear_ratio" | "wastegate_linear_ratio" | "turbine_efficiency_min" => {
+        "compressor_head_linear_fraction" | "compressor_efficiency_min"
+        | "wastegate_linear_ratio" | "turbine_efficiency_min" => {
             kept("a numerical choice of the model (continuation or clamp), not fitted.")
         }
         "compressor_efficiency_max" => vec![format!(
@@ -264,24 +281,43 @@ fn note(key: &str, o: &FitOutcome, opts: &FitOptions) -> Vec<String> {
         )],
         "compressor_flow_at_efficiency_max" => vec![],
         "throttle_heat_capacity_ratio" => kept("the tuned k_th of the model's flow function."),
+        "throttle_linear_ratio" => vec![format!(
+            "Set by the fit (not the start file's): {}, as the wastegate's and turbine's; it decides the flow of a nearly",
+            opts.throttle_linear_ratio
+        ), "wide-open throttle (0.9 would make it proportional to a 1 % pressure drop instead of its square root).".into()],
         "throttle_angle_gain_deg_per_pct" => kept(
             "the map's alpha is a fraction, given in % (x 100); 0.9 deg/% makes 100 % a 90 deg plate.",
         ),
         "throttle_angle_offset_deg" => vec![],
-        "throttle_area_coeffs_m2_rad" => vec![format!(
-            "Fitted: the area each point implies (W_air over the flow function at p_bef_thr, T_bef_thr, p_im), {} points with p_im/p_bef_thr < 0.95, relative weights; relative RMS {:.3}.",
-            r.throttle.points, r.throttle.rms_rel
-        )],
-        "vol_eff_factor" => vec![
-            "Fitted: the polynomial in p_im is the whole factor (C_eta_vol 1), linear least squares on the air".into(),
+        "throttle_area_coeffs_m2_rad" => vec![
             format!(
-                "flow with T_bef_thr (the model's T_im), {} points; W_air RMS {:.2} g/s, relative {:.3}. Range: the points' p_im.",
+                "Fitted in two steps: the area each point implies (W_air over the flow function at p_bef_thr, T_bef_thr, p_im),"
+            ),
+            format!(
+                "{} points with p_im/p_bef_thr < 0.95, relative weights (relative RMS {:.3}); then on the p_im the throttle gives",
+                r.throttle.area_points, r.throttle.area_rms_rel
+            ),
+            format!(
+                "at the measured p_bef_thr, T_bef_thr and flow, all {} points (wide open included); p_im RMS {:.0} Pa.",
+                r.throttle.points, r.throttle.rms_p_im_pa
+            ),
+        ],
+        "vol_eff_factor" => vec![
+            "Fitted: the factor is poly4(p_im) + s1 n + s2 n^2 (C_eta_vol 1, n in 1000 rpm; the additive speed term of Eriksson".into(),
+            "and Nielsen, quadratic as Guzzella and Onder's eta_omega), linear least squares on the air flow with T_bef_thr (the".into(),
+            format!(
+                "model's T_im), {} points; W_air RMS {:.2} g/s, relative {:.3}. Ranges: the points' p_im and speed.",
                 r.vol_eff.points,
                 r.vol_eff.rms_kg_s * 1000.0,
                 r.vol_eff.rms_rel
             ),
         ],
-        "vol_eff_poly_kpa" | "vol_eff_poly_min_kpa" | "vol_eff_poly_max_kpa" => vec![],
+        "vol_eff_poly_kpa"
+        | "vol_eff_poly_min_kpa"
+        | "vol_eff_poly_max_kpa"
+        | "vol_eff_speed_coeffs_krpm"
+        | "vol_eff_speed_min_krpm"
+        | "vol_eff_speed_max_krpm" => vec![],
         "exhaust_temp_zero_flow_k" => vec![format!(
             "Fitted with the pipe length (T_em at the measured exhaust flow, {} points): T_0 {} K, C_eo {} K s/kg, length {} m; T_em RMS {:.1} K.",
             r.exhaust_temp.points,
@@ -298,41 +334,51 @@ fn note(key: &str, o: &FitOutcome, opts: &FitOptions) -> Vec<String> {
         | "exhaust_pipe_nusselt_coeff" | "exhaust_pipe_nusselt_exponent"
         | "exhaust_gas_viscosity_pa_s" | "exhaust_gas_conductivity_w_per_m_k" => vec![],
         "wastegate_effective_area_m2" => kept(
-            "undetermined (the map has no wastegate position); the check solves the position per point.",
+            "undetermined (the map has no wastegate position); the check solves the position per point, and only position x area enters the model.",
         ),
         "turbine_diameter_m" => kept("undetermined (only scales the fitted BSR_opt)."),
         "turbine_flow_k1_kg_k05_per_s_kpa" => vec![
+            "Fitted to the turbine flow the power balance implies, whatever the wastegate passed: the compressor".into(),
+            "model's power plus friction over the turbine's work per kg at the measured p_em, T_em, p_t with the".into(),
             format!(
-                "Fitted to the engine map where the wastegate is taken as closed (p_bef_thr/p_af >= {}, {} points):",
-                opts.closed_wastegate_boost_ratio, r.turbine.points
-            ),
-            format!(
-                "the exhaust flow at p_em, T_em, p_t: k1 {}; relative RMS {:.3}. turb_map.csv",
+                "map's efficiency; {} of {} training points where the compressor works; k1 {}, flow RMS {:.2} g/s.",
+                r.turbine.points,
+                r.turbine.working_points,
                 est(&r.turbine.k1),
-                r.turbine.rms_flow_rel
+                r.turbine.rms_kg_s * 1000.0
             ),
             format!(
-                "gives k1 {:.4e}, k2 {:.3}: {:.2} times less flow than the engine passes (not used).",
-                r.turbine_map.k1, r.turbine_map.k2, r.turbine_map.engine_to_map_flow_ratio
+                "The flow is linear in p_em - p_t over the mapped ratios: the square-root form with k1, k2 free fits {:.2} g/s",
+                r.turbine.sqrt_form_rms_kg_s * 1000.0
+            ),
+            format!(
+                "with k2 running to {:.1e}. The wastegate then passes {:.1} % of the exhaust on average there (at most {:.1} %).",
+                r.turbine.sqrt_form_k2,
+                100.0 * r.turbine.bypass_share.0,
+                100.0 * r.turbine.bypass_share.1
+            ),
+            format!(
+                "turb_map.csv's flow parameter fits k1 {:.4e}, k2 {:.3}: 4 to 5 times less flow, not used (unit or reference unclear).",
+                r.turbine_map.k1, r.turbine_map.k2
             ),
         ],
         "turbine_flow_k2" => kept(
-            "undetermined: the measured flow parameter rises more steeply with the expansion ratio than the form allows for any k2 (a free k2 runs to 0).",
+            "only shapes the flow beyond the linear continuation's start, at expansion ratios no map point reaches.",
         ),
-        "turbine_efficiency_max" => vec![
-            format!(
-                "Fitted at the same points: the torque the compressor model needs (plus friction) at its speed;"
-            ),
-            format!(
-                "eta_max {}; relative RMS {:.3}. turb_map.csv: {:.3} at BSR {:.3} (not used).",
-                est(&r.turbine.efficiency_max),
-                r.turbine.rms_torque_rel,
-                r.turbine_map.efficiency_max,
-                r.turbine_map.bsr_at_efficiency_max
-            ),
-        ],
+        "turbine_linear_ratio" => vec![format!(
+            "Set by the fit: the smallest Pi_t = p_t/p_em of the points used, rounded down to 0.05 ({}), so that the flow is",
+            r.turbine.linear_ratio
+        ), "linear in 1 - Pi_t over the whole mapped range.".into()],
+        "turbine_efficiency_max" => vec![format!(
+            "From turb_map.csv ({} points; BSR at T03 {} K with the turbine diameter): eta_max {:.4}, BSR_opt {:.4}; RMS {:.4}.",
+            r.turbine_map.points,
+            opts.turbine_reference_temperature_k,
+            r.turbine_map.efficiency_max,
+            r.turbine_map.bsr_at_efficiency_max,
+            r.turbine_map.rms_eta
+        )],
         "turbine_bsr_at_efficiency_max" => vec![format!(
-            "Kept from the start file: undetermined (the points span BSR {:.3} to {:.3} only).",
+            "(the engine's working points span BSR {:.3} to {:.3} with the model's turbo speed)",
             r.turbine.bsr_range.0, r.turbine.bsr_range.1
         )],
         "turbo_inertia_kg_m2" => kept("the shaft's inertia, friction and limits are not determined by stationary data."),
@@ -407,18 +453,22 @@ Model: estimators/src/models/turbo/ (fit: its fit/ module). Each component is fi
 map measures both its sides, with the model's own component code; every 5th map point (line 6,
 11, ...) is held out of these fits ({} training, {} held out). Ambient: one pressure for the
 whole map, fitted with the air filter ({:.0} Pa); the ambient temperature is each point's T_af.
-Wastegate: the map has no position; the turbine is fitted where the boost ratio is at least
-{} (wastegate taken as closed), and the check below solves the position per point to match
-the measured p_bef_thr (so p_ic is matched, not predicted, except where it saturates).
+Volumetric efficiency: a 4th-order polynomial in p_im plus a quadratic in engine speed.
+Throttle: fitted on the p_im it gives (wide-open points included), its linear continuation
+from 0.99. Wastegate: the map has no position, and no point is assumed to have it closed: the
+turbine's efficiency is the turbine map's, its flow what the power balance with the compressor
+model implies it passed (linear in p_em - p_t over the mapped range); the check below solves
+the position per point to match the measured p_bef_thr (so p_ic is matched, not predicted,
+except where it saturates). Every choice was made on the training points' figures only.
 Undetermined by these data and kept from the start file: the volumes, the compressor and
-turbine diameters, the intercooler resistance, the wastegate area, the pipe geometry other than
-its length, the shaft, the numerical continuations and clamps.
+turbine diameters, the intercooler resistance, the wastegate area (only position x area
+enters), the turbine's k2 (beyond the mapped ratios), the pipe geometry other than its length,
+the shaft, the other numerical continuations and clamps.
 
 ",
         r.training_points,
         r.held_out_points,
         r.air_filter.ambient_pressure_pa.value,
-        opts.closed_wastegate_boost_ratio
     );
     for line in header.lines().chain(table(check).lines()) {
         if line.is_empty() {
@@ -432,14 +482,7 @@ its length, the shaft, the numerical continuations and clamps.
         for line in note(key, o, opts) {
             let _ = writeln!(s, "# {line}");
         }
-        let text = match value {
-            Value::Num(v) => num(v),
-            Value::Arr(a) => format!(
-                "[{}]",
-                a.iter().map(|v| num(*v)).collect::<Vec<_>>().join(", ")
-            ),
-        };
-        let _ = writeln!(s, "{key} = {text}");
+        let _ = writeln!(s, "{key} = {}", value_text(&value));
     }
     s
 }
@@ -481,5 +524,13 @@ pub fn json(o: &FitOutcome, check: &CheckReport) -> serde_json::Value {
         "wastegate_matched": check.points.iter().filter(|p| p.solve == WastegateSolve::Matched).count(),
         "all": stats(&check.all),
         "held_out": stats(&check.held_out),
+        "points": check.points.iter().map(|p| serde_json::json!({
+            "line": p.index + 2,
+            "held_out": p.held_out,
+            "wastegate": p.wastegate,
+            "turbo_speed_rad_s": p.turbo_speed_rad_s,
+            "model": QUANTITIES.iter().zip(p.model).map(|((n, _), v)| ((*n).to_string(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),
+            "measured": QUANTITIES.iter().zip(p.measured).map(|((n, _), v)| ((*n).to_string(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),
+        })).collect::<Vec<_>>(),
     })
 }

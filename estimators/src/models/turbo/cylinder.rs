@@ -4,7 +4,9 @@
 //! - `W_ei = (C_eta_vol p(p_im) + dC_eta_vol) (r_c - (p_em/p_im)^(1/k_e)) / (r_c - 1)
 //!   p_im V_d omega_e / (4 pi R T_im)` (four-stroke, `omega_e` in rad/s). `p(p_im)` is the VEP4
 //!   4th-order polynomial in `p_im` (kPa), evaluated at `p_im` clamped to its fitted range
-//!   (`[0, 0, 0, 0, 1]`, i.e. 1, for the generic set). `dC_eta_vol` is the augmented 14th
+//!   (`[0, 0, 0, 0, 1]`, i.e. 1, for the generic set), plus the optional speed terms
+//!   `s1 n + s2 n^2` (`n` engine speed in 1000 rpm, clamped to its fitted range; 0 unless a
+//!   parameter file sets them, see `TurboParams::vol_eff_speed_coeffs_krpm`). `dC_eta_vol` is the augmented 14th
 //!   state of the paper (§4.2): it is added to the whole factor, which for the generic set is the
 //!   paper's `C_eta_vol + dC_eta_vol` exactly.
 //! - The residual-gas term is floored at 0 (no flow from the cylinders into the intake; it
@@ -23,6 +25,9 @@ use std::f64::consts::PI;
 
 use super::ad::Scalar;
 
+/// 1000 rpm per rad/s: `60 / (2 pi 1000)`.
+pub const KRPM_PER_RAD_S: f64 = 60.0 / (2.0 * PI * 1000.0);
+
 /// Smallest exhaust flow per pipe in the heat-loss model (kg/s).
 pub const MIN_PIPE_FLOW_KG_S: f64 = 1e-6;
 
@@ -39,6 +44,12 @@ pub struct Cylinders {
     pub poly_min_kpa: f64,
     /// Upper end (kPa).
     pub poly_max_kpa: f64,
+    /// Speed terms `[s1, s2]` per 1000 rpm (`[0, 0]`: none).
+    pub speed_coeffs: [f64; 2],
+    /// Speed terms' argument range (1000 rpm).
+    pub speed_min_krpm: f64,
+    /// Upper end (1000 rpm).
+    pub speed_max_krpm: f64,
     /// `r_c`.
     pub r_c: f64,
     /// `1 / k_e`.
@@ -81,13 +92,19 @@ pub struct CylinderPoint<S> {
 }
 
 impl Cylinders {
-    /// Volumetric-efficiency factor `C_eta_vol p(p_im) + dc` at `p_im` (Pa).
+    /// Volumetric-efficiency factor `C_eta_vol (p(p_im) + s1 n + s2 n^2) + dc` at `p_im` (Pa)
+    /// and engine speed `omega_e` (rad/s; `n` in 1000 rpm). Without speed terms the sum is
+    /// skipped, so that such a set evaluates bit for bit as before the terms existed.
     #[inline]
-    pub fn eta_factor<S: Scalar>(&self, p_im: S, dc: S) -> S {
+    pub fn eta_factor<S: Scalar>(&self, p_im: S, omega_e: S, dc: S) -> S {
         let x = (p_im / 1000.0).clamp_c(self.poly_min_kpa, self.poly_max_kpa);
         let mut acc = S::cst(self.poly[0]);
         for &c in &self.poly[1..] {
             acc = acc * x + c;
+        }
+        if self.speed_coeffs != [0.0, 0.0] {
+            let n = (omega_e * KRPM_PER_RAD_S).clamp_c(self.speed_min_krpm, self.speed_max_krpm);
+            acc = acc + n * (n * self.speed_coeffs[1] + self.speed_coeffs[0]);
         }
         acc * self.c_eta_vol + dc
     }
@@ -106,7 +123,7 @@ impl Cylinders {
         t_amb: S,
         dc: S,
     ) -> CylinderPoint<S> {
-        let eta_factor = self.eta_factor(p_im, dc);
+        let eta_factor = self.eta_factor(p_im, omega_e, dc);
         let residual =
             ((-(p_em / p_im).powf(self.inv_ke) + self.r_c) / (self.r_c - 1.0)).max_c(0.0);
         let w_ei = (eta_factor * residual * p_im * omega_e / t_im * self.flow_gain).max_c(0.0);
@@ -138,6 +155,9 @@ pub(crate) fn cylinders(p: &super::TurboParams, r_air: f64, cp_e: f64) -> Cylind
         poly: p.vol_eff_poly_kpa,
         poly_min_kpa: p.vol_eff_poly_min_kpa,
         poly_max_kpa: p.vol_eff_poly_max_kpa,
+        speed_coeffs: p.vol_eff_speed_coeffs_krpm,
+        speed_min_krpm: p.vol_eff_speed_min_krpm,
+        speed_max_krpm: p.vol_eff_speed_max_krpm,
         r_c: p.compression_ratio,
         inv_ke: 1.0 / p.exhaust_heat_capacity_ratio,
         afs: p.stoichiometric_air_fuel_ratio,

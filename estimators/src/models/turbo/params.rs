@@ -102,6 +102,26 @@ pub struct TurboParams {
     pub vol_eff_poly_min_kpa: f64,
     /// Upper end of the polynomial's argument (kPa).
     pub vol_eff_poly_max_kpa: f64,
+    /// Engine-speed terms added to the polynomial, `s1 n + s2 n^2` with `n` the engine speed
+    /// in 1000 rpm (clamped to the speed range below): `[s1 /krpm, s2 /krpm^2]`. The additive
+    /// form of Eriksson and Nielsen (2014, eq. 7.12: `c0 + c1 sqrt(p_im) + c2 sqrt(N)`), with the
+    /// speed term a quadratic as in Guzzella and Onder (2010, `eta_omega`): the breathing
+    /// losses grow with the flow velocity (valve-flow friction, about quadratic in speed) while
+    /// intake tuning raises the filling at mid speeds. Optional: the default `[0, 0]` is no
+    /// speed dependence (the generic and VEP4 sets have none).
+    #[serde(
+        default = "zero_speed_coeffs",
+        deserialize_with = "crate::param::exact_array"
+    )]
+    pub vol_eff_speed_coeffs_krpm: [f64; 2],
+    /// The speed terms are evaluated at the engine speed clamped to `[min, max]` (1000 rpm):
+    /// a fit over the mapped speeds, not to be extrapolated. Optional, default 0.
+    #[serde(default)]
+    pub vol_eff_speed_min_krpm: f64,
+    /// Upper end of the speed terms' argument (1000 rpm). Optional, default 15 (above the
+    /// model's accepted range of 14.3).
+    #[serde(default = "default_speed_max_krpm")]
+    pub vol_eff_speed_max_krpm: f64,
 
     /// Engine-out exhaust temperature at zero flow `T_0` (K): `T_eo = T_0 + C_eo W_eo`.
     pub exhaust_temp_zero_flow_k: f64,
@@ -157,6 +177,14 @@ pub struct TurboParams {
     pub turbo_speed_max_rad_s: f64,
 }
 
+fn zero_speed_coeffs() -> [f64; 2] {
+    [0.0, 0.0]
+}
+
+fn default_speed_max_krpm() -> f64 {
+    15.0
+}
+
 /// Admissible ranges: physical bounds generous enough for any passenger-car engine, tight
 /// enough to catch a unit slip (kPa for Pa, mm for m, percent for a fraction).
 pub mod ranges {
@@ -202,6 +230,10 @@ pub mod ranges {
     pub const VOL_EFF_FACTOR: Range = Range::above(0.0, 2.0, "");
     /// Volumetric-efficiency polynomial coefficients (signed).
     pub const VOL_EFF_COEFF: Range = Range::closed(-100.0, 100.0, "kPa^-k");
+    /// Volumetric-efficiency speed coefficients (signed).
+    pub const VOL_EFF_SPEED_COEFF: Range = Range::closed(-10.0, 10.0, "krpm^-k");
+    /// Speed terms' argument range.
+    pub const VOL_EFF_KRPM: Range = Range::closed(0.0, 20.0, "krpm");
     /// Polynomial argument range.
     pub const VOL_EFF_KPA: Range = Range::closed(1.0, 1000.0, "kPa");
     /// Zero-flow engine-out temperature.
@@ -510,6 +542,11 @@ impl TurboParams {
         for (i, &c) in self.vol_eff_poly_kpa.iter().enumerate() {
             r::VOL_EFF_COEFF.check(&format!("vol_eff_poly_kpa[{i}]"), c)?;
         }
+        for (i, &c) in self.vol_eff_speed_coeffs_krpm.iter().enumerate() {
+            r::VOL_EFF_SPEED_COEFF.check(&format!("vol_eff_speed_coeffs_krpm[{i}]"), c)?;
+        }
+        r::VOL_EFF_KRPM.check("vol_eff_speed_min_krpm", self.vol_eff_speed_min_krpm)?;
+        r::VOL_EFF_KRPM.check("vol_eff_speed_max_krpm", self.vol_eff_speed_max_krpm)?;
         let above = |key: &str, v: f64, lo_key: &str, lo: f64| {
             if v > lo {
                 Ok(())
@@ -532,6 +569,12 @@ impl TurboParams {
             self.vol_eff_poly_max_kpa,
             "vol_eff_poly_min_kpa",
             self.vol_eff_poly_min_kpa,
+        )?;
+        above(
+            "vol_eff_speed_max_krpm",
+            self.vol_eff_speed_max_krpm,
+            "vol_eff_speed_min_krpm",
+            self.vol_eff_speed_min_krpm,
         )?;
         if !(self.compressor_flow_at_efficiency_max < self.compressor_flow_max) {
             return Err(ParamError::new(
@@ -601,20 +644,38 @@ impl TurboParams {
                 ));
             }
         }
-        // The volumetric-efficiency factor must stay positive over the polynomial's range.
+        // The volumetric-efficiency factor must stay positive over the polynomial's range (and
+        // the speed terms' range: the terms are a quadratic, so its extremes are at the ends or
+        // at the vertex, all checked).
         let (lo, hi) = (self.vol_eff_poly_min_kpa, self.vol_eff_poly_max_kpa);
+        let (n_lo, n_hi) = (self.vol_eff_speed_min_krpm, self.vol_eff_speed_max_krpm);
+        let [s1, s2] = self.vol_eff_speed_coeffs_krpm;
+        let mut speeds = vec![n_lo, n_hi];
+        if s2 != 0.0 {
+            let vertex = -s1 / (2.0 * s2);
+            if vertex > n_lo && vertex < n_hi {
+                speeds.push(vertex);
+            }
+        }
         for i in 0..=100 {
             let p = lo + (hi - lo) * f64::from(i) / 100.0;
-            let v = self.vol_eff_factor * poly4(&self.vol_eff_poly_kpa, p);
-            if !(v > 0.0 && v < 3.0) {
-                return Err(ParamError::new(
-                    "vol_eff_poly_kpa",
-                    format!("{:?}", self.vol_eff_poly_kpa),
-                    format!(
-                        "give a volumetric-efficiency factor {} at {p:.1} kPa (must be in (0, 3))",
-                        show(v)
-                    ),
-                ));
+            for &n in &speeds {
+                let v = self.vol_eff_factor
+                    * (poly4(&self.vol_eff_poly_kpa, p) + vol_eff_speed_terms(self, n));
+                if !(v > 0.0 && v < 3.0) {
+                    return Err(ParamError::new(
+                        "vol_eff_poly_kpa",
+                        format!(
+                            "{:?} with speed terms {:?}",
+                            self.vol_eff_poly_kpa, self.vol_eff_speed_coeffs_krpm
+                        ),
+                        format!(
+                            "give a volumetric-efficiency factor {} at {p:.1} kPa and {n:.2} krpm \
+                             (must be in (0, 3))",
+                            show(v)
+                        ),
+                    ));
+                }
             }
         }
         Ok(())
@@ -631,6 +692,13 @@ impl TurboParams {
 /// Plate angle (rad) of a throttle input (%).
 pub(crate) fn throttle_angle_rad(p: &TurboParams, pct: f64) -> f64 {
     (p.throttle_angle_gain_deg_per_pct * pct + p.throttle_angle_offset_deg) * PI / 180.0
+}
+
+/// The volumetric efficiency's speed terms `s1 n + s2 n^2` at `n` (1000 rpm, clamped).
+pub(crate) fn vol_eff_speed_terms(p: &TurboParams, krpm: f64) -> f64 {
+    let n = krpm.clamp(p.vol_eff_speed_min_krpm, p.vol_eff_speed_max_krpm);
+    let [s1, s2] = p.vol_eff_speed_coeffs_krpm;
+    n * (s1 + n * s2)
 }
 
 /// `c[0] x^4 + c[1] x^3 + ... + c[4]` (Horner).
@@ -657,6 +725,8 @@ mod tests {
         for text in [
             include_str!("../../../../config/turbo.toml"),
             include_str!("../../../../config/turbo_vep4.toml"),
+            include_str!("../../../../config/turbo_tsfs09.toml"),
+            include_str!("../../../../config/turbo_liu_ice.toml"),
         ] {
             let p = load(text);
             p.validate().expect("validates");
