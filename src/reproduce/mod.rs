@@ -1,2 +1,3 @@
 pub mod intake;
 pub mod table2;
+pub mod turbo;

@@ -79,6 +79,8 @@ pub const DT_RANGE: Range = Range::closed(1e-4, 1.0, "s");
 pub const SDIRK_GAMMA: f64 = 1.0 - std::f64::consts::FRAC_1_SQRT_2;
 /// Newton converges when its update is below this, relative to the state scales.
 pub const NEWTON_TOL: f64 = 1e-10;
+/// Accepted Newton tolerances ([`TurboDiscrete::with_newton_tolerance`]).
+pub const NEWTON_TOL_RANGE: Range = Range::closed(1e-14, 1e-3, "1 (relative to the state scales)");
 /// Most Newton iterations per stage before the step is halved.
 pub const MAX_NEWTON_ITERATIONS: usize = 10;
 /// Most halvings of a step whose Newton iterations do not converge (2^8 = 256 pieces).
@@ -308,6 +310,7 @@ pub(crate) fn stage<const N: usize, D: Dynamics<N>>(
     c: &SVector<f64, N>,
     hg: f64,
     y0: SVector<f64, N>,
+    tol: f64,
 ) -> Option<(SVector<f64, N>, SVector<f64, N>, SMatrix<f64, N, N>)> {
     let id = SMatrix::<f64, N, N>::identity();
     let (k, lo, hi) = d.boxed();
@@ -337,7 +340,7 @@ pub(crate) fn stage<const N: usize, D: Dynamics<N>>(
         if !step.is_finite() || !f.iter().all(|v| v.is_finite()) {
             return None;
         }
-        if step < NEWTON_TOL {
+        if step < tol {
             if held {
                 j.row_mut(k).fill(0.0);
             }
@@ -362,12 +365,13 @@ fn sdirk2<const N: usize, D: Dynamics<N>>(
     x: &SVector<f64, N>,
     h: f64,
     want_phi: bool,
+    tol: f64,
 ) -> Option<(SVector<f64, N>, SMatrix<f64, N, N>)> {
     let id = SMatrix::<f64, N, N>::identity();
     let hg = h * SDIRK_GAMMA;
-    let (_, f1, j1) = stage(d, x, hg, *x)?;
+    let (_, f1, j1) = stage(d, x, hg, *x, tol)?;
     let c2 = x + f1 * (h * (1.0 - SDIRK_GAMMA));
-    let (y2, _, j2) = stage(d, &c2, hg, c2 + f1 * hg)?;
+    let (y2, _, j2) = stage(d, &c2, hg, c2 + f1 * hg, tol)?;
     let phi = if want_phi {
         let a1 = solve(id - j1 * hg, id)?;
         let b = id + j1 * a1 * (h * (1.0 - SDIRK_GAMMA));
@@ -392,15 +396,16 @@ fn advance<const N: usize, D: Dynamics<N>>(
     h: f64,
     depth: u32,
     want_phi: bool,
+    tol: f64,
 ) -> Option<(SVector<f64, N>, SMatrix<f64, N, N>)> {
-    if let Some(r) = sdirk2(d, x, h, want_phi) {
+    if let Some(r) = sdirk2(d, x, h, want_phi, tol) {
         return Some(r);
     }
     if depth == 0 {
         return None;
     }
-    let (xm, p1) = advance(d, x, h / 2.0, depth - 1, want_phi)?;
-    let (xe, p2) = advance(d, &xm, h / 2.0, depth - 1, want_phi)?;
+    let (xm, p1) = advance(d, x, h / 2.0, depth - 1, want_phi, tol)?;
+    let (xe, p2) = advance(d, &xm, h / 2.0, depth - 1, want_phi, tol)?;
     Some((xe, if want_phi { p2 * p1 } else { p2 }))
 }
 
@@ -411,13 +416,14 @@ fn run<const N: usize, D: Dynamics<N>>(
     h: f64,
     substeps: usize,
     want_phi: bool,
+    tol: f64,
 ) -> Result<(SVector<f64, N>, SMatrix<f64, N, N>), TurboError> {
     let mut x = *x;
     d.project(&mut x);
     let mut phi = SMatrix::<f64, N, N>::identity();
     for k in 0..substeps {
         let (next, p) =
-            advance(d, &x, h, MAX_HALVINGS, want_phi).ok_or(TurboError::NotConverged {
+            advance(d, &x, h, MAX_HALVINGS, want_phi, tol).ok_or(TurboError::NotConverged {
                 iterations: MAX_NEWTON_ITERATIONS,
                 residual: f64::NAN,
             })?;
@@ -451,6 +457,7 @@ pub struct TurboDiscrete {
     dt_s: f64,
     substeps: usize,
     h: f64,
+    newton_tol: f64,
 }
 
 impl TurboDiscrete {
@@ -463,7 +470,25 @@ impl TurboDiscrete {
             dt_s,
             substeps: n,
             h: dt_s / n as f64,
+            newton_tol: NEWTON_TOL,
         })
+    }
+
+    /// The same step with Newton's stopping tolerance `tol` (largest update relative to the
+    /// state scales, [`NEWTON_TOL_RANGE`]) instead of [`NEWTON_TOL`]. Newton converges
+    /// quadratically near the solution, so the error left when an update of size `tol` is
+    /// accepted is of the order of `tol^2`: an observer, whose own corrections are of the
+    /// order of the sensor noise (1e-3 of the state), loses nothing at `1e-6` and halves the
+    /// iterations (figures in [`super::observer`]).
+    pub fn with_newton_tolerance(mut self, tol: f64) -> Result<Self, ParamError> {
+        NEWTON_TOL_RANGE.check("newton_tolerance", tol)?;
+        self.newton_tol = tol;
+        Ok(self)
+    }
+
+    /// Newton's stopping tolerance (relative to the state scales).
+    pub fn newton_tolerance(&self) -> f64 {
+        self.newton_tol
     }
 
     /// The continuous model.
@@ -494,7 +519,7 @@ impl TurboDiscrete {
             model: &self.model,
             input: u,
         };
-        run(&d, x, self.h, self.substeps, true)
+        run(&d, x, self.h, self.substeps, true, self.newton_tol)
     }
 
     /// The state after one step (see [`Self::step_with_jacobian`]); skips the transition matrix.
@@ -504,7 +529,7 @@ impl TurboDiscrete {
             model: &self.model,
             input: u,
         };
-        run(&d, x, self.h, self.substeps, false).map(|(x, _)| x)
+        run(&d, x, self.h, self.substeps, false, self.newton_tol).map(|(x, _)| x)
     }
 }
 
@@ -556,6 +581,18 @@ impl TurboDiscrete14 {
         &self.inner.model
     }
 
+    /// As [`TurboDiscrete::with_newton_tolerance`].
+    pub fn with_newton_tolerance(self, tol: f64) -> Result<Self, ParamError> {
+        Ok(Self {
+            inner: self.inner.with_newton_tolerance(tol)?,
+        })
+    }
+
+    /// The step length (s).
+    pub fn dt_s(&self) -> f64 {
+        self.inner.dt_s
+    }
+
     /// One step and its transition matrix (14x14; `dC_eta_vol` is carried unchanged and its
     /// column holds the sensitivity of the step to it).
     #[allow(clippy::type_complexity)]
@@ -573,7 +610,14 @@ impl TurboDiscrete14 {
         let m = &self.inner.model;
         m.check_input(u)?;
         let d = Augmented { model: m, input: u };
-        run(&d, x, self.inner.h, self.inner.substeps, true)
+        run(
+            &d,
+            x,
+            self.inner.h,
+            self.inner.substeps,
+            true,
+            self.inner.newton_tol,
+        )
     }
 
     /// One step.
@@ -585,7 +629,15 @@ impl TurboDiscrete14 {
         let m = &self.inner.model;
         m.check_input(u)?;
         let d = Augmented { model: m, input: u };
-        run(&d, x, self.inner.h, self.inner.substeps, false).map(|(x, _)| x)
+        run(
+            &d,
+            x,
+            self.inner.h,
+            self.inner.substeps,
+            false,
+            self.inner.newton_tol,
+        )
+        .map(|(x, _)| x)
     }
 }
 

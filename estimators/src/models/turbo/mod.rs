@@ -91,6 +91,7 @@ pub mod discrete;
 pub mod dynamics;
 pub mod fit;
 pub mod nozzle;
+pub mod observer;
 pub mod params;
 pub mod restriction;
 pub mod shaft;

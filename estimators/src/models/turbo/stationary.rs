@@ -18,7 +18,7 @@
 //! point of a 108-point grid over speed, throttle and wastegate converges, for both parameter
 //! sets.
 
-use super::discrete::{stage, Plain};
+use super::discrete::{stage, Plain, NEWTON_TOL};
 use super::{TurboError, TurboInput, TurboModel, TurboState, N_STATES};
 
 /// Convergence threshold of the scaled residual (1/s).
@@ -99,7 +99,7 @@ impl TurboModel {
                     residual: r,
                 });
             }
-            match stage(&d, &x, dt, x) {
+            match stage(&d, &x, dt, x, NEWTON_TOL) {
                 Some((y, _, _)) => {
                     x = y;
                     // The model's (saturated) vector field decides stationarity.
