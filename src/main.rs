@@ -220,6 +220,31 @@ enum Fit {
         #[arg(long)]
         json: bool,
     },
+    /// Design the turbocharged air-path observer's gain table (stationary Kalman gains on a
+    /// grid of engine speed x manifold pressure, sensors p_ic, p_im and air flow at 50 ms) for
+    /// a parameter file, and write it as a calibration file a monitor loads.
+    ///
+    /// Q is the model's stationary error on a fault-free LiU-ICE log (--log) or on the TSFS09
+    /// engine map (--map); R the [measurement_noise] of a parameter file, floored at the
+    /// sensors' accuracy. Refuses to write a table with an unstable node. The same inputs give
+    /// the same bytes.
+    TurboGains {
+        /// The model's parameter file (e.g. config/turbo_liu_ice.toml).
+        #[arg(long)]
+        params: PathBuf,
+        /// The parameter file whose [measurement_noise] table gives R (default: --params).
+        #[arg(long)]
+        measurement_noise: Option<PathBuf>,
+        /// Q from this fault-free LiU-ICE log (MCAP).
+        #[arg(long, conflicts_with = "map", required_unless_present = "map")]
+        log: Option<PathBuf>,
+        /// Q from the engine map in this TSFS09 data directory.
+        #[arg(long)]
+        map: Option<PathBuf>,
+        /// The output gain file.
+        #[arg(short, long)]
+        out: PathBuf,
+    },
 }
 
 #[derive(Subcommand)]
@@ -506,6 +531,40 @@ fn run(command: Command) -> Result<()> {
                     fdd::fit::ice::table(&run.checks)
                 ))
             }
+        }
+        Command::Fit {
+            what:
+                Fit::TurboGains {
+                    params,
+                    measurement_noise,
+                    log,
+                    map,
+                    out,
+                },
+        } => {
+            let source = match (log, map) {
+                (Some(log), _) => fdd::fit::gains::NoiseSource::Log(log),
+                (None, Some(map)) => fdd::fit::gains::NoiseSource::Map(map),
+                (None, None) => anyhow::bail!("one of --log and --map is needed"),
+            };
+            let args = fdd::fit::gains::FitGainsArgs {
+                measurement_noise: measurement_noise.unwrap_or_else(|| params.clone()),
+                params,
+                source,
+                out,
+            };
+            let run = fdd::fit::gains::run(&args)?;
+            let worst = run
+                .design
+                .nodes
+                .iter()
+                .map(|n| n.closed_loop_radius)
+                .fold(0.0, f64::max);
+            emit(&format!(
+                "wrote {} ({} nodes, largest closed-loop spectral radius {worst:.5})\n",
+                args.out.display(),
+                run.design.nodes.len()
+            ))
         }
         Command::Reproduce { what } => match what {
             Reproduce::Table2 {

@@ -372,14 +372,8 @@ fn truth_marks_the_fault_from_its_onset_and_none_without_one() {
 
 #[test]
 fn the_imported_truth_is_read_by_fdd_replay() {
-    // config/fdd.toml has no turbo monitor yet: add the truth topic to a copy.
-    let dir = tempfile::tempdir().expect("tempdir");
-    let cfg = dir.path().join("fdd.toml");
-    let mut text = std::fs::read_to_string(root().join("config/fdd.toml")).expect("config");
-    text.push_str(
-        "\n[[truth]]\ntopic = \"/truth/turbo\"\nfield = \"value\"\nestimate = \"turbo\"\n",
-    );
-    std::fs::write(&cfg, text).expect("write");
+    // config/fdd.toml reads the turbo truth topic.
+    let cfg = root().join("config/fdd.toml");
     let o = fdd()
         .arg("replay")
         .arg(

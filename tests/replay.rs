@@ -449,13 +449,14 @@ fn remapped_config_replays_a_log_with_other_names() {
     }
     w.finish().expect("finish");
 
-    // With the default mapping nothing matches: every monitor runs (a log with none of any
-    // monitor's topics is taken as mis-mapped) and every signal is missing.
+    // With the default mapping nothing matches: every enabled monitor runs (a log with none of
+    // any monitor's topics is taken as mis-mapped) and every signal they read is missing (the
+    // turbo monitor is off by default: its nine signals are not watched).
     let s = run_lib(&log, &ReplayOptions::default());
     let n = RuntimeConfig::load(None).expect("default").signals.len();
-    assert_eq!(n, 8, "3 throttle and 5 intake signals");
-    assert_eq!(s.missing_signals().count(), n);
-    assert_eq!(s.dtcs_raised().count(), n);
+    assert_eq!(n, 17, "3 throttle, 5 intake and 9 turbo signals");
+    assert_eq!(s.missing_signals().count(), 8);
+    assert_eq!(s.dtcs_raised().count(), 8);
 
     let cfg_text = r#"
 [[signals]]

@@ -133,15 +133,9 @@ fn a_bad_turbo_scenario_is_refused_naming_the_file_and_the_key() {
 
 #[test]
 fn replay_reads_the_simulated_truth_like_the_imported_one() {
-    // config/fdd.toml has no turbo monitor yet: add the truth topic to a copy (as
-    // tests/import.rs does for the imported LiU-ICE logs).
-    let dir = tempfile::tempdir().expect("tempdir");
-    let cfg = dir.path().join("fdd.toml");
-    let mut cfg_text = std::fs::read_to_string(root().join("config/fdd.toml")).expect("config");
-    cfg_text.push_str(
-        "\n[[truth]]\ntopic = \"/truth/turbo\"\nfield = \"value\"\nestimate = \"turbo\"\n",
-    );
-    std::fs::write(&cfg, cfg_text).expect("write");
+    // config/fdd.toml reads the turbo truth topic (as tests/import.rs checks for the imported
+    // LiU-ICE logs).
+    let cfg = root().join("config/fdd.toml");
     let o = fdd()
         .arg("replay")
         .arg(root().join("fixtures/data/turbo/turbo_pim_gain.mcap"))

@@ -23,3 +23,4 @@ pub mod signal_table;
 pub mod staleness;
 pub mod text_file;
 pub mod throttle;
+pub mod turbo;

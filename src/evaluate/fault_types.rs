@@ -194,11 +194,16 @@ pub const TURBO: &[FaultType] = turbo_table!(
 /// the fault classes still possible).
 pub const INTAKE_GROUP_EVENTS: &[&str] = &["intake_air_path_group"];
 
+/// The air-path monitor's group event: detected, not isolated (its candidates name the fault
+/// classes still possible).
+pub const TURBO_GROUP_EVENTS: &[&str] = &["turbo_air_path_group"];
+
 /// The group events of the monitor `name` (a DTC of one of them is a group DTC, judged by its
 /// candidates; every other DTC is specific).
 pub fn group_events(monitor: &str) -> &'static [&'static str] {
     match monitor {
         "intake" => INTAKE_GROUP_EVENTS,
+        "turbo" => TURBO_GROUP_EVENTS,
         _ => &[],
     }
 }

@@ -8,6 +8,7 @@
 //! same bytes (the fits and the check run in a fixed order on one thread, and every number is
 //! written in Rust's shortest round-trip form or a fixed number of decimals).
 
+pub mod gains;
 pub mod ice;
 pub mod render;
 

@@ -472,7 +472,7 @@ pub const DIAGNOSIS: TopicSchema = TopicSchema {
   "description": "One monitor step's diagnosis: whether it flags its subsystem as faulty and how strongly it names each fault class (the per-sample output TDR, FAR and FIA are computed from). Log time = step time, ns.",
   "type": "object",
   "properties": {
-    "monitor": {"type": "string", "description": "the monitor (throttle, intake)"},
+    "monitor": {"type": "string", "description": "the monitor (throttle, intake, turbo)"},
     "flagged": {"type": "boolean", "description": "a test fails, a fault is being isolated, or a decided fault is present"},
     "classes": {"type": "array", "items": {"type": "string"}, "description": "the monitor's fault classes, in the order of scores"},
     "scores": {"type": "array", "items": {"type": "number", "minimum": 0, "maximum": 1}, "description": "score per class, 0..1 (all 0 when not flagged)"}

@@ -90,7 +90,7 @@ pub struct TruthConfig {
     pub estimate: String,
 }
 
-/// The default truth topics: the throttle's and the intake manifold's.
+/// The default truth topics: the throttle's, the intake manifold's and the air path's.
 pub fn default_truths() -> Vec<TruthConfig> {
     vec![
         TruthConfig {
@@ -102,6 +102,11 @@ pub fn default_truths() -> Vec<TruthConfig> {
             topic: "/truth/intake".into(),
             field: "p_m_pa".into(),
             estimate: "manifold_pressure".into(),
+        },
+        TruthConfig {
+            topic: "/truth/turbo".into(),
+            field: "w_ei_kg_s".into(),
+            estimate: "cylinder_flow".into(),
         },
     ]
 }
@@ -211,6 +216,14 @@ pub struct MonitorsConfig {
     /// for `throttle_config`); absent: the embedded default.
     #[serde(default)]
     pub intake_config: Option<std::path::PathBuf>,
+    /// The turbocharged air-path monitor.
+    #[serde(default)]
+    pub turbo: bool,
+    /// Air-path monitor settings (a `config/turbo_monitor.toml`-shaped file naming its model
+    /// parameter file; relative paths as for `throttle_config`); absent: the embedded default
+    /// (the LiU-ICE engine's parameters).
+    #[serde(default)]
+    pub turbo_config: Option<std::path::PathBuf>,
 }
 
 impl MonitorsConfig {
@@ -222,6 +235,9 @@ impl MonitorsConfig {
         }
         if self.intake {
             v.push("intake");
+        }
+        if self.turbo {
+            v.push("turbo");
         }
         v
     }
@@ -331,6 +347,7 @@ impl RuntimeConfig {
             for p in [
                 &mut cfg.monitors.throttle_config,
                 &mut cfg.monitors.intake_config,
+                &mut cfg.monitors.turbo_config,
             ]
             .into_iter()
             .flatten()
@@ -421,6 +438,7 @@ impl RuntimeConfig {
         for (key, path) in [
             ("throttle_config", &self.monitors.throttle_config),
             ("intake_config", &self.monitors.intake_config),
+            ("turbo_config", &self.monitors.turbo_config),
         ] {
             if path.as_ref().is_some_and(|p| p.as_os_str().is_empty()) {
                 return Err(root
@@ -521,18 +539,29 @@ mod tests {
                 "intake_throttle",
                 "egr_command",
                 "map",
-                "maf"
+                "maf",
+                "turbo_p_ic",
+                "turbo_t_ic",
+                "turbo_p_im",
+                "turbo_maf",
+                "turbo_engine_speed",
+                "turbo_throttle",
+                "turbo_wastegate",
+                "ambient_pressure",
+                "ambient_temperature"
             ]
         );
         assert_eq!(cfg.staleness.debounce, DebounceConfig::MonitorInternal);
         assert!(cfg.monitors.throttle);
         assert!(cfg.monitors.intake);
+        // Wired, not yet calibrated: off by default.
+        assert!(!cfg.monitors.turbo);
         assert_eq!(cfg.signal_specs()[1].max_age_ns, 5_000_000);
         assert_eq!(cfg.signal_specs()[6].max_age_ns, 250_000_000);
         assert_eq!(cfg.truth, default_truths());
         let mem = cfg.staleness_memory_config();
         assert_eq!(mem.events[1].name, "tps_no_signal");
-        assert_eq!(mem.validate().expect("valid").len(), 8);
+        assert_eq!(mem.validate().expect("valid").len(), 17);
     }
 
     #[test]

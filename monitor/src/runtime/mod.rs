@@ -303,6 +303,9 @@ impl Runtime {
         if cfg.monitors.intake && wanted("intake") {
             subsystems.push(Box::new(intake_monitor(cfg, &table)?));
         }
+        if cfg.monitors.turbo && wanted("turbo") {
+            subsystems.push(Box::new(turbo_monitor(cfg, &table)?));
+        }
         let mut watch: Vec<SignalId> = Vec::new();
         for m in &subsystems {
             for &id in m.inputs() {
@@ -1031,10 +1034,24 @@ pub fn monitor_inputs(cfg: &RuntimeConfig, monitor: &str) -> Result<Vec<String>,
                 m.maf_signal,
             ]
         }
+        "turbo" => {
+            let m = crate::turbo::TurboConfig::load(cfg.monitors.turbo_config.as_deref())?.monitor;
+            vec![
+                m.p_ic_signal,
+                m.t_ic_signal,
+                m.p_im_signal,
+                m.maf_signal,
+                m.speed_signal,
+                m.throttle_signal,
+                m.wastegate_signal,
+                m.ambient_pressure_signal,
+                m.ambient_temperature_signal,
+            ]
+        }
         other => {
             return Err(RuntimeError::UnknownMonitor(
                 other.to_string(),
-                "throttle, intake".to_string(),
+                "throttle, intake, turbo".to_string(),
             ))
         }
     })
@@ -1068,6 +1085,31 @@ fn throttle_monitor(
             .map(|p| p.display().to_string())
             .unwrap_or_else(|| "embedded config/throttle.toml".into()),
         "throttle monitor configured"
+    );
+    Ok(monitor)
+}
+
+fn turbo_monitor(
+    cfg: &RuntimeConfig,
+    table: &SignalTable,
+) -> Result<crate::turbo::TurboMonitor, RuntimeError> {
+    let turbo = crate::turbo::TurboConfig::load(cfg.monitors.turbo_config.as_deref())?;
+    let monitor = crate::turbo::TurboMonitor::new(&turbo.params, &turbo.monitor, table).map_err(
+        |message| RuntimeError::Monitor {
+            origin: cfg.origin.clone(),
+            monitor: "turbo".into(),
+            message,
+        },
+    )?;
+    tracing::info!(
+        config = cfg
+            .monitors
+            .turbo_config
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_else(|| "embedded config/turbo_monitor.toml".into()),
+        params = %turbo.params_origin,
+        "turbo monitor configured"
     );
     Ok(monitor)
 }

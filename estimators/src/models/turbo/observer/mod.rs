@@ -34,6 +34,7 @@
 //! also `p_ic`). Values in SI units as the model's [`TurboSignals`].
 
 pub mod design;
+pub mod file;
 pub mod gains;
 
 use nalgebra::{SMatrix, SVector};

@@ -1,0 +1,111 @@
+//! The air-path monitor (monitor/src/turbo/): its configuration files load, a fault-free
+//! simulated city drive raises no DTC, and a frame allocates nothing. (Its detection and
+//! isolation figures are not measured yet: the monitor is being built, see the README.)
+
+use std::path::PathBuf;
+
+use fdd_fixtures::turbo_profile::DriveStyle;
+use fdd_fixtures::turbo_scenario::TurboScenario;
+use fdd_fixtures::turbo_sim::TurboSim;
+use fdd_monitor::monitor::Output;
+use fdd_monitor::scheduler::Scheduler;
+use fdd_monitor::signal_table::SignalTable;
+use fdd_monitor::turbo::{TurboConfig, TurboMonitor, EVENT_NAMES};
+
+#[global_allocator]
+static GLOBAL: fdd_testkit::CountingAllocator = fdd_testkit::CountingAllocator;
+
+const NAMES: [&str; 9] = [
+    "turbo_p_ic",
+    "turbo_t_ic",
+    "turbo_p_im",
+    "turbo_maf",
+    "turbo_engine_speed",
+    "turbo_throttle",
+    "turbo_wastegate",
+    "ambient_pressure",
+    "ambient_temperature",
+];
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Runs `sc` through the monitor on the TSFS09 parameters (the simulated engine's monitor
+/// file); returns the failed events with their times (s), and the heap allocations counted in
+/// the scheduler's steps after `count_from_s`.
+fn run(sc: &TurboScenario, count_from_s: f64) -> (Vec<(f64, String)>, usize, u64) {
+    let cfg = TurboConfig::load(Some(&root().join("config/turbo_monitor_tsfs09.toml")))
+        .expect("the simulated engine's monitor file");
+    let mut table = SignalTable::with_names(&NAMES, 250_000_000).expect("table");
+    let ids = NAMES.map(|n| table.id(n).expect("declared"));
+    let monitor = TurboMonitor::new(&cfg.params, &cfg.monitor, &table).expect("monitor");
+    let mut sched = Scheduler::new(0);
+    sched.add(Box::new(monitor)).expect("schedules");
+    let mut failed: Vec<(f64, String)> = Vec::with_capacity(64);
+    let mut sink = |_: usize, t: u64, o: Output<'_>| {
+        if let Output::Event(e) = o {
+            if e.status_after.test_failed() && !e.status_before.test_failed() {
+                failed.push((t as f64 * 1e-9, e.event.to_string()));
+            }
+        }
+    };
+    sched.start_operation_cycle(0, &mut sink);
+    let (mut allocations, mut counted) = (0usize, 0u64);
+    for f in TurboSim::from_scenario(sc, "test").expect("sim") {
+        if f.t_ns as f64 * 1e-9 >= count_from_s {
+            let (steps, n) =
+                fdd_testkit::counted(|| sched.run_until(f.t_ns + 1, &table, &mut sink));
+            allocations += n;
+            counted += steps;
+        } else {
+            sched.run_until(f.t_ns + 1, &table, &mut sink);
+        }
+        let values = [
+            f.p_ic_pa,
+            f.t_ic_k,
+            f.p_im_pa,
+            f.maf_kg_s,
+            f.engine_speed_rad_s,
+            f.throttle_pct,
+            f.wastegate,
+            f.ambient_pressure_pa,
+            f.ambient_temperature_k,
+        ];
+        for (id, v) in ids.iter().zip(values) {
+            table.set(*id, f.t_ns, v).expect("sample");
+        }
+    }
+    (failed, allocations, counted)
+}
+
+#[test]
+fn the_configuration_files_load_and_name_their_parameter_files() {
+    let embedded = TurboConfig::load(None).expect("embedded");
+    let liu = TurboConfig::load(Some(&root().join("config/turbo_monitor.toml"))).expect("LiU");
+    assert_eq!(embedded.params, liu.params);
+    let sim =
+        TurboConfig::load(Some(&root().join("config/turbo_monitor_tsfs09.toml"))).expect("TSFS09");
+    assert_ne!(sim.params, liu.params, "two engines");
+    // A monitor file naming a missing parameter file is refused with that file's name.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let f = dir.path().join("m.toml");
+    std::fs::write(&f, "params = \"nowhere.toml\"\n").expect("write");
+    let e = TurboConfig::load(Some(&f)).unwrap_err().to_string();
+    assert!(e.contains("nowhere.toml"), "{e}");
+    assert_eq!(EVENT_NAMES.len(), 7);
+}
+
+#[test]
+fn a_fault_free_city_drive_raises_nothing_and_frames_allocate_nothing() {
+    let sc = TurboScenario::new("nominal", 120.0, 4242, DriveStyle::City);
+    // Count after the start phase (15 s of learning, then the tests complete once: those
+    // status changes are events, which may allocate).
+    let (failed, allocations, counted) = run(&sc, 20.0);
+    assert!(failed.is_empty(), "{failed:?}");
+    assert!(counted > 5_000, "{counted} steps counted");
+    assert_eq!(
+        allocations, 0,
+        "{allocations} allocations in {counted} steps"
+    );
+}
