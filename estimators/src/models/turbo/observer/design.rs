@@ -276,6 +276,35 @@ pub struct NoiseSample {
     pub q: [f64; N_STATES_AUGMENTED],
 }
 
+/// The six volumes (m^3, state order) and the air's and exhaust's gas constants (J/(kg K)):
+/// what turns a pressure error into a mass error, `dM = dp V / (R T)`.
+fn volumes_and_gas_constants(model: &TurboModel) -> ([f64; 6], f64, f64) {
+    let p = model.params();
+    (
+        [
+            p.air_filter_volume_m3,
+            p.compressor_volume_m3,
+            p.intercooler_volume_m3,
+            p.intake_manifold_volume_m3,
+            p.exhaust_manifold_volume_m3,
+            p.exhaust_system_volume_m3,
+        ],
+        p.air_gas_constant_j_per_kg_k,
+        p.exhaust_gas_constant_j_per_kg_k,
+    )
+}
+
+/// Floors every entry (and replaces a non-finite one) at [`Q_FLOOR_FRACTION`] of its state's
+/// scale, squared.
+fn apply_q_floor(q: &mut [f64; N_STATES_AUGMENTED], scales: &[f64; N_STATES_AUGMENTED]) {
+    for (qi, s) in q.iter_mut().zip(scales) {
+        let floor = (Q_FLOOR_FRACTION * s).powi(2);
+        if !qi.is_finite() || *qi < floor {
+            *qi = floor;
+        }
+    }
+}
+
 /// The paper's state noise at every engine-map point: the squared stationary error of each
 /// state (model minus measured, from the whole-model check), a volume's mass error from its
 /// pressure error at the measured temperature. Substitutes where the map measures nothing:
@@ -291,17 +320,7 @@ pub fn state_noise_from_map(
     check: &CheckReport,
     turbo_speed_error_rad_s: f64,
 ) -> Vec<NoiseSample> {
-    let p = model.params();
-    let r_air = p.air_gas_constant_j_per_kg_k;
-    let r_exh = p.exhaust_gas_constant_j_per_kg_k;
-    let v = [
-        p.air_filter_volume_m3,
-        p.compressor_volume_m3,
-        p.intercooler_volume_m3,
-        p.intake_manifold_volume_m3,
-        p.exhaust_manifold_volume_m3,
-        p.exhaust_system_volume_m3,
-    ];
+    let (v, r_air, r_exh) = volumes_and_gas_constants(model);
     let scales = model.state_scales();
     let mut out = Vec::with_capacity(check.points.len());
     for pc in &check.points {
@@ -339,12 +358,7 @@ pub fn state_noise_from_map(
         let u = crate::models::turbo::fit::check::input(ep, pc.wastegate, ep.p_af_pa);
         let factor = model.signals(&x, &u).eta_vol_factor;
         q[X_DC_ETA_VOL] = (rel_w * factor).powi(2);
-        for (i, qi) in q.iter_mut().enumerate() {
-            let floor = (Q_FLOOR_FRACTION * scales[i]).powi(2);
-            if !qi.is_finite() || *qi < floor {
-                *qi = floor;
-            }
-        }
+        apply_q_floor(&mut q, scales);
         out.push(NoiseSample {
             speed_rad_s: ep.engine_speed_rev_s * std::f64::consts::TAU,
             p_im_pa: ep.p_im_pa,
@@ -391,17 +405,7 @@ pub fn state_noise_from_log(
     turbo_speed_error_rad_s: f64,
 ) -> Vec<NoiseSample> {
     let mask = crate::models::turbo::fit::ice::quasi_stationary(samples, opts);
-    let p = model.params();
-    let r_air = p.air_gas_constant_j_per_kg_k;
-    let r_exh = p.exhaust_gas_constant_j_per_kg_k;
-    let v = [
-        p.air_filter_volume_m3,
-        p.compressor_volume_m3,
-        p.intercooler_volume_m3,
-        p.intake_manifold_volume_m3,
-        p.exhaust_manifold_volume_m3,
-        p.exhaust_system_volume_m3,
-    ];
+    let (v, r_air, r_exh) = volumes_and_gas_constants(model);
     let scales = model.state_scales();
     let mut out = Vec::new();
     let mut guess: Option<TurboState> = None;
@@ -447,12 +451,7 @@ pub fn state_noise_from_log(
         q[X_T_ES] = (UNMEASURED_EXHAUST_TEMP_REL * m.t_es_k).powi(2);
         q[X_OMEGA_T] = turbo_speed_error_rad_s.powi(2);
         q[X_DC_ETA_VOL] = (e_w * m.eta_vol_factor).powi(2);
-        for (i, qi) in q.iter_mut().enumerate() {
-            let floor = (Q_FLOOR_FRACTION * scales[i]).powi(2);
-            if !qi.is_finite() || *qi < floor {
-                *qi = floor;
-            }
-        }
+        apply_q_floor(&mut q, scales);
         out.push(NoiseSample {
             speed_rad_s: s.engine_speed_rad_s,
             p_im_pa: s.p_im_pa,
