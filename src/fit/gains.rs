@@ -22,26 +22,23 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use fdd_estimators::models::turbo::fit::check::check_engine_map;
-use fdd_estimators::models::turbo::fit::components::fit_air_filter;
 use fdd_estimators::models::turbo::fit::ice::{quasi_stationary, IceOptions, LogSample};
-use fdd_estimators::models::turbo::fit::{EnginePoint, FitError, FitOptions};
+use fdd_estimators::models::turbo::fit::FitError;
 use fdd_estimators::models::turbo::observer::design::{
-    design_gains_on_path, state_noise_at, state_noise_from_log, state_noise_from_map, ActuatorPath,
-    Conditions, Design, DesignError, DesignOptions, NoiseSample, Q_FLOOR_FRACTION,
-    UNMEASURED_EXHAUST_TEMP_REL,
+    design_gains_on_path, state_noise_at, state_noise_from_log, ActuatorPath, Conditions, Design,
+    DesignError, DesignOptions, NoiseSample, Q_FLOOR_FRACTION, UNMEASURED_EXHAUST_TEMP_REL,
 };
 use fdd_estimators::models::turbo::observer::file::{
     GainFile, GainFileData, GainFileError, GainNodeRecord,
 };
 use fdd_estimators::models::turbo::observer::Sensor;
 use fdd_estimators::models::turbo::{
-    TurboError, TurboInput, TurboModel, TurboParams, N_STATES_AUGMENTED, STATE_NAMES, X_OMEGA_T,
+    TurboError, TurboModel, TurboParams, N_STATES_AUGMENTED, STATE_NAMES, X_OMEGA_T,
 };
 use fdd_estimators::ParamError;
 use thiserror::Error;
 
-use super::{load_params, read_data, write_atomic, FitIoError};
+use super::{load_params, write_atomic, FitIoError};
 use crate::reproduce::turbo as repro;
 
 /// The sensors of every gain file this command writes, in column order: the LiU-ICE logs' and
@@ -338,61 +335,18 @@ fn from_log(
     Ok((noise, conditions, path, NoiseStory { lines }))
 }
 
-/// The inputs `fdd reproduce turbo` gives the model at a transient's sample.
-fn transient_input(tr: &repro::Transient, i: usize, speed: f64, ambient_pa: f64) -> TurboInput {
-    let wastegate_frac = tr.wastegate.as_ref().map_or(0.0, |w| w[i].clamp(0.0, 1.0));
-    let lambda = tr.lambda.as_ref().map_or(1.0, |l| {
-        if l[i].is_finite() {
-            l[i].clamp(0.5, 3.0)
-        } else {
-            1.0
-        }
-    });
-    TurboInput {
-        throttle_pct: tr.throttle_pct[i].clamp(0.0, 100.0),
-        engine_speed_rad_s: speed,
-        wastegate_frac,
-        lambda,
-        ambient_pressure_pa: ambient_pa,
-        ambient_temperature_k: repro::AMBIENT_TEMPERATURE_K,
-    }
-}
-
-/// The TSFS09 design from the engine map, as `fdd reproduce turbo` makes it.
 fn from_map(
     model: &TurboModel,
     params: &TurboParams,
     dir: &Path,
 ) -> Result<(Vec<NoiseSample>, Conditions, ActuatorPath, NoiseStory), FitGainsError> {
-    let data = read_data(dir)?;
-    let opts = FitOptions::tsfs09();
-    let training: Vec<EnginePoint> = data
-        .engine
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| !opts.is_held_out(*i))
-        .map(|(_, p)| *p)
-        .collect();
-    let ambient = fit_air_filter(&training, params)?.ambient_pressure_pa.value;
-    let check = check_engine_map(params, &data.engine, ambient, &opts)?;
-    let tuning = repro::read_transient(&dir.join(repro::TUNING_LOG))?;
-    let segs = repro::stationary_segments(&tuning);
-    let Some(&(a0, b0)) = segs.first().filter(|(a, _)| *a == 0) else {
-        return Err(repro::TurboReproError::Log2 {
-            file: tuning.file.clone(),
-            what: "no stationary start before the first input step".into(),
-        }
-        .into());
-    };
-    let speed = repro::speed_from_map(&data.engine, tuning.p_im_pa[0], tuning.maf_kg_s[0])
-        .ok_or_else(|| repro::TurboReproError::Log2 {
-            file: tuning.file.clone(),
-            what: "initial p_im and air flow lie outside the engine map's speed lines".into(),
-        })?;
-    let st = model.stationary_point(&transient_input(&tuning, 0, speed, ambient), None)?;
-    let q_speed =
-        (st.state[X_OMEGA_T] - mean(tuning.turbo_speed_rad_s[a0..b0].iter().copied())).abs();
-    let noise = state_noise_from_map(model, &data.engine, &check, q_speed);
+    let repro::MapNoise {
+        ambient_pressure_pa: ambient,
+        noise,
+        tuning_speed_rad_s: speed,
+        turbo_speed_error_rad_s: q_speed,
+        ..
+    } = repro::map_noise(model, params, dir)?;
     let conditions = Conditions {
         ambient_pressure_pa: ambient,
         ambient_temperature_k: repro::AMBIENT_TEMPERATURE_K,

@@ -43,7 +43,7 @@ use fdd_estimators::models::turbo::fit::check::check_engine_map;
 use fdd_estimators::models::turbo::fit::components::fit_air_filter;
 use fdd_estimators::models::turbo::fit::{EnginePoint, FitError, FitOptions};
 use fdd_estimators::models::turbo::observer::design::{
-    design_gains, state_noise_from_map, Conditions, DesignError, DesignOptions,
+    design_gains, state_noise_from_map, Conditions, DesignError, DesignOptions, NoiseSample,
 };
 use fdd_estimators::models::turbo::observer::{GainTable, Interpolation, Sensor, TurboObserver};
 use fdd_estimators::models::turbo::{TurboError, TurboInput, TurboModel, TurboParams, X_OMEGA_T};
@@ -357,8 +357,10 @@ fn step_lag(sensor: &[f64], est: &[f64], windows: &[(usize, usize)]) -> Option<f
     lag_samples(&s, &e)
 }
 
-/// The inputs of sample `i`.
-fn input(tr: &Transient, i: usize, speed: f64, ambient_pa: f64) -> TurboInput {
+/// The inputs the model gets at sample `i` of a transient: the logged throttle, wastegate
+/// (closed where not logged) and lambda (1 where not logged, or not finite), the given engine
+/// speed and ambient pressure, and [`AMBIENT_TEMPERATURE_K`].
+pub fn transient_input(tr: &Transient, i: usize, speed: f64, ambient_pa: f64) -> TurboInput {
     let wg = tr.wastegate.as_ref().map_or(0.0, |w| w[i].clamp(0.0, 1.0));
     let lambda = tr.lambda.as_ref().map_or(1.0, |l| {
         if l[i].is_finite() {
@@ -407,10 +409,10 @@ fn run_observer(
         mode,
         augmented,
     )?;
-    obs.reset_stationary(&input(tr, 0, speed, ambient_pa))?;
+    obs.reset_stationary(&transient_input(tr, 0, speed, ambient_pa))?;
     let mut run = Run::default();
     for i in 0..tr.t.len() {
-        let u = input(tr, i, speed, ambient_pa);
+        let u = transient_input(tr, i, speed, ambient_pa);
         let y = SVector::<f64, 2>::new(tr.p_im_pa[i], tr.maf_kg_s[i]);
         let s = obs.update(&u, &y)?;
         run.p_im_pa.push(s.signals.p_im_pa);
@@ -516,11 +518,48 @@ fn rms_pct(est: &[f64], meas: &[f64]) -> f64 {
     100.0 * (e / est.len() as f64).sqrt() / mean(meas)
 }
 
-/// Runs the reproduction.
-pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
-    let params: TurboParams = load_params(&s.params)?;
-    let model = TurboModel::new(params.clone())?;
-    let data = read_data(&s.data)?;
+/// The paper's state noise on the TSFS09 engine, as this reproduction and `fdd fit
+/// turbo-gains --map` both take it: the model's stationary error at every engine-map point
+/// (ambient pressure from the air filter fit on the training points), with the turbo speed's
+/// entry from the tuning transient's stationary start (the map has no turbo speed): the
+/// model's stationary speed at the start's inputs against the measured mean there.
+#[derive(Debug, Clone)]
+pub struct MapNoise {
+    /// The engine map's points.
+    pub engine: Vec<EnginePoint>,
+    /// Ambient pressure (Pa) from the air filter fit.
+    pub ambient_pressure_pa: f64,
+    /// The state noise per map point.
+    pub noise: Vec<NoiseSample>,
+    /// The tuning log.
+    pub tuning: Transient,
+    /// Its stationary start (sample indices).
+    pub stationary_start: (usize, usize),
+    /// Its engine speed read off the map (rad/s).
+    pub tuning_speed_rad_s: f64,
+    /// The turbo speed's state-noise entry (rad/s).
+    pub turbo_speed_error_rad_s: f64,
+}
+
+/// The engine speed of a transient read off the map ([`speed_from_map`]), or an error naming
+/// the log and its initial point.
+fn transient_speed(engine: &[EnginePoint], tr: &Transient) -> Result<f64, TurboReproError> {
+    speed_from_map(engine, tr.p_im_pa[0], tr.maf_kg_s[0]).ok_or_else(|| TurboReproError::Log2 {
+        file: tr.file.clone(),
+        what: format!(
+            "initial p_im {:.0} Pa and air flow {:.4} kg/s lie outside the engine map's speed lines",
+            tr.p_im_pa[0], tr.maf_kg_s[0]
+        ),
+    })
+}
+
+/// See [`MapNoise`]; `dir` is the TSFS09 data directory.
+pub fn map_noise(
+    model: &TurboModel,
+    params: &TurboParams,
+    dir: &Path,
+) -> Result<MapNoise, TurboReproError> {
+    let data = read_data(dir)?;
     let opts = FitOptions::tsfs09();
     let training: Vec<EnginePoint> = data
         .engine
@@ -529,20 +568,47 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
         .filter(|(i, _)| !opts.is_held_out(*i))
         .map(|(_, p)| *p)
         .collect();
-    let ambient = fit_air_filter(&training, &params)?
-        .ambient_pressure_pa
-        .value;
-    let check = check_engine_map(&params, &data.engine, ambient, &opts)?;
-
-    let tuning = read_transient(&s.data.join(TUNING_LOG))?;
-    let held = read_transient(&s.data.join(HELD_OUT_LOG))?;
-    let segs_tuning = stationary_segments(&tuning);
-    let Some(&(a0, b0)) = segs_tuning.first().filter(|(a, _)| *a == 0) else {
+    let ambient = fit_air_filter(&training, params)?.ambient_pressure_pa.value;
+    let check = check_engine_map(params, &data.engine, ambient, &opts)?;
+    let tuning = read_transient(&dir.join(TUNING_LOG))?;
+    let Some(&(a0, b0)) = stationary_segments(&tuning)
+        .first()
+        .filter(|(a, _)| *a == 0)
+    else {
         return Err(TurboReproError::Log2 {
             file: tuning.file.clone(),
             what: "no stationary start before the first input step".into(),
         });
     };
+    let speed = transient_speed(&data.engine, &tuning)?;
+    let st = model.stationary_point(&transient_input(&tuning, 0, speed, ambient), None)?;
+    let q_speed = (st.state[X_OMEGA_T] - mean(&tuning.turbo_speed_rad_s[a0..b0])).abs();
+    let noise = state_noise_from_map(model, &data.engine, &check, q_speed);
+    Ok(MapNoise {
+        engine: data.engine,
+        ambient_pressure_pa: ambient,
+        noise,
+        tuning,
+        stationary_start: (a0, b0),
+        tuning_speed_rad_s: speed,
+        turbo_speed_error_rad_s: q_speed,
+    })
+}
+
+/// Runs the reproduction.
+pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
+    let params: TurboParams = load_params(&s.params)?;
+    let model = TurboModel::new(params.clone())?;
+    let MapNoise {
+        engine,
+        ambient_pressure_pa: ambient,
+        noise,
+        tuning,
+        stationary_start: (a0, b0),
+        tuning_speed_rad_s: speed_tuning,
+        turbo_speed_error_rad_s: q_speed,
+    } = map_noise(&model, &params, &s.data)?;
+    let held = read_transient(&s.data.join(HELD_OUT_LOG))?;
     // R from the tuning log's stationary start.
     let r_std: [f64; 2] = [&tuning.p_im_pa, &tuning.maf_kg_s].map(|v| {
         let seg = &v[a0..b0];
@@ -550,25 +616,7 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
         let sd = detrended_std(&tuning.t[a0..b0], seg);
         sd.max(R_FLOOR_REL * m.abs())
     });
-    let speed_of = |tr: &Transient| {
-        speed_from_map(&data.engine, tr.p_im_pa[0], tr.maf_kg_s[0]).ok_or_else(|| {
-            TurboReproError::Log2 {
-                file: tr.file.clone(),
-                what: format!(
-                    "initial p_im {:.0} Pa and air flow {:.4} kg/s lie outside the engine map's speed lines",
-                    tr.p_im_pa[0], tr.maf_kg_s[0]
-                ),
-            }
-        })
-    };
-    let speed_tuning = speed_of(&tuning)?;
-    let speed_held = speed_of(&held)?;
-    // Turbo-speed state noise: the model's stationary speed at the tuning start against the
-    // measured mean there.
-    let u0 = input(&tuning, 0, speed_tuning, ambient);
-    let st = model.stationary_point(&u0, None)?;
-    let q_speed = st.state[X_OMEGA_T] - mean(&tuning.turbo_speed_rad_s[a0..b0]);
-    let noise = state_noise_from_map(&model, &data.engine, &check, q_speed.abs());
+    let speed_held = transient_speed(&engine, &held)?;
     let design_opts = DesignOptions {
         dt_s: DT_S,
         sensors: [Sensor::PIm, Sensor::Maf],
@@ -672,7 +720,7 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
     Ok(TurboReport {
         ambient_pressure_pa: ambient,
         r_std,
-        turbo_speed_q_rad_s: q_speed.abs(),
+        turbo_speed_q_rad_s: q_speed,
         worst_closed_loop_radius: worst,
         tuning: figures(&tuning, speed_tuning)?,
         held_out: figures(&held, speed_held)?,
@@ -733,12 +781,12 @@ fn open_loop(
         fdd_estimators::models::turbo::discrete::TurboDiscrete::new(model.clone(), DT_S, DT_S)?
             .with_newton_tolerance(fdd_estimators::models::turbo::observer::OBSERVER_NEWTON_TOL)?;
     let mut x = model
-        .stationary_point(&input(tr, 0, speed, ambient), None)?
+        .stationary_point(&transient_input(tr, 0, speed, ambient), None)?
         .state;
     let mut out = Vec::with_capacity(tr.t.len());
     for i in 0..tr.t.len() {
         if i > 0 {
-            x = step.step(&x, &input(tr, i - 1, speed, ambient))?;
+            x = step.step(&x, &transient_input(tr, i - 1, speed, ambient))?;
         }
         out.push(x[X_OMEGA_T]);
     }
