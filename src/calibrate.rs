@@ -40,6 +40,7 @@ use fdd_monitor::runtime::config::TruthConfig;
 use fdd_monitor::runtime::Runtime;
 
 pub mod intake;
+pub mod turbo;
 
 use crate::evaluate::expand_inputs;
 use crate::replay::{replay_observed, ReplayObserver, ReplayOptions, RuntimeConfig};
@@ -138,7 +139,7 @@ pub enum CalibrateError {
     Text(#[from] fdd_monitor::text_file::TextFileError),
     #[error("{}: refusing to write the calibration over {what}; choose another output directory", file.display())]
     OutputIsInput { file: PathBuf, what: String },
-    #[error("monitor `{0}`: fdd calibrate knows `throttle` and `intake`")]
+    #[error("monitor `{0}`: fdd calibrate knows `throttle`, `intake` and `turbo`")]
     UnknownMonitor(String),
     #[error("re-identifying the throttle model: {0}")]
     Identify(#[from] IdentifyError),
@@ -187,7 +188,7 @@ impl CalibrateOptions {
 }
 
 /// The files `fdd calibrate -o DIR` writes into `DIR`.
-pub const WRITTEN_FILES: [&str; 3] = ["fdd.toml", "throttle.toml", "intake.toml"];
+pub const WRITTEN_FILES: [&str; 4] = ["fdd.toml", "throttle.toml", "intake.toml", "turbo.toml"];
 
 /// Refuses an output directory where the calibration would write over one of its inputs: the
 /// starting configuration (`--config`), a monitor settings file it names, or an input log or
@@ -202,9 +203,13 @@ pub fn check_output_dir(
     if Path::new(&base.origin).is_file() {
         read.push((PathBuf::from(&base.origin), "the --config file"));
     }
-    for p in [&base.monitors.throttle_config, &base.monitors.intake_config]
-        .into_iter()
-        .flatten()
+    for p in [
+        &base.monitors.throttle_config,
+        &base.monitors.intake_config,
+        &base.monitors.turbo_config,
+    ]
+    .into_iter()
+    .flatten()
     {
         read.push((p.clone(), "a monitor settings file the configuration names"));
     }
@@ -649,21 +654,44 @@ fn pass(
     Ok(c)
 }
 
-/// A runtime configuration whose throttle monitor reads `throttle_text` (written to `dir`).
-fn runtime_with(
+/// The monitor a calibration pass runs alone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Only {
+    Throttle,
+    Intake,
+    Turbo,
+}
+
+/// A runtime configuration in which `only` runs alone, reading `text` (written to `dir` as
+/// `throttle.toml`, `intake.toml` or `turbo.toml`; a turbo file's parameter file must already
+/// be in `dir`).
+pub(crate) fn runtime_with_only(
     base: &RuntimeConfig,
     dir: &Path,
-    throttle_text: &str,
+    text: &str,
+    only: Only,
 ) -> Result<RuntimeConfig, CalibrateError> {
-    let path = dir.join("throttle.toml");
-    std::fs::write(&path, throttle_text).map_err(|source| CalibrateError::Write {
+    let name = match only {
+        Only::Throttle => "throttle.toml",
+        Only::Intake => "intake.toml",
+        Only::Turbo => "turbo.toml",
+    };
+    let path = dir.join(name);
+    std::fs::write(&path, text).map_err(|source| CalibrateError::Write {
         file: path.clone(),
         source,
     })?;
     let mut cfg = base.clone();
-    cfg.monitors.throttle = true;
-    cfg.monitors.intake = false;
-    cfg.monitors.throttle_config = Some(path);
+    let m = &mut cfg.monitors;
+    m.throttle = only == Only::Throttle;
+    m.intake = only == Only::Intake;
+    m.turbo = only == Only::Turbo;
+    let slot = match only {
+        Only::Throttle => &mut m.throttle_config,
+        Only::Intake => &mut m.intake_config,
+        Only::Turbo => &mut m.turbo_config,
+    };
+    *slot = Some(path);
     Ok(cfg)
 }
 
@@ -707,7 +735,7 @@ pub fn calibrate(
         ("wattmeter_noise_max_w", 10.0),
     ]);
     let text = with_monitor_keys(&throttle_text, &throttle_origin, &keys)?;
-    let cfg = runtime_with(base, work.path(), &text)?;
+    let cfg = runtime_with_only(base, work.path(), &text, Only::Throttle)?;
     // The per-log levels: the collector keeps the last of each log. With re-identification,
     // the first pass also gathers the raw signals, and the model error is measured again with
     // the identified model.
@@ -752,7 +780,7 @@ pub fn calibrate(
         throttle_text = with_model(&throttle_text, &throttle_origin, &id)?;
         identified = Some(id);
         let text = with_monitor_keys(&throttle_text, &throttle_origin, &keys)?;
-        let cfg = runtime_with(base, work.path(), &text)?;
+        let cfg = runtime_with_only(base, work.path(), &text, Only::Throttle)?;
         model_error.clear();
         for log in &logs {
             let c = pass(std::slice::from_ref(log), &cfg, opts.block_s, false)?;
@@ -784,7 +812,7 @@ pub fn calibrate(
     let mut keys: Vec<(&str, f64)> = unreachable.to_vec();
     keys.extend(noise_keys);
     let text = with_monitor_keys(&throttle_text, &throttle_origin, &keys)?;
-    let cfg = runtime_with(base, work.path(), &text)?;
+    let cfg = runtime_with_only(base, work.path(), &text, Only::Throttle)?;
     let c = pass(&logs, &cfg, opts.block_s, false)?;
     let hours = c.total_ns as f64 * 1e-9 / 3600.0;
     check_extrapolation(hours, opts)?;
@@ -907,6 +935,7 @@ fn header(logs: usize, hours: f64, opts: &CalibrateOptions) -> String {
 pub enum Calibrated {
     Throttle(Box<Calibration>),
     Intake(Box<intake::IntakeCalibration>),
+    Turbo(Box<turbo::TurboCalibration>),
 }
 
 impl Calibrated {
@@ -922,6 +951,14 @@ impl Calibrated {
                     ("fdd.toml", &c.runtime_toml),
                 ],
             ),
+            Calibrated::Turbo(c) => write_files(
+                dir,
+                &[
+                    ("turbo.toml", &c.turbo_toml),
+                    (c.params_name.as_str(), &c.params_toml),
+                    ("fdd.toml", &c.runtime_toml),
+                ],
+            ),
         }
     }
 
@@ -933,6 +970,17 @@ impl Calibrated {
                 let mut s = header(c.logs.len(), c.hours, opts);
                 c.render_body(&mut s);
                 render_tests(&mut s, &c.tests);
+                s
+            }
+            Calibrated::Turbo(c) => {
+                // No false-alarm rate: the thresholds are a margin on the largest value seen.
+                let mut s = format!(
+                    "{} logs, {:.2} h; blocks of {} s\n",
+                    c.logs.len(),
+                    c.hours,
+                    opts.block_s
+                );
+                c.render_body(&mut s);
                 s
             }
         }
@@ -1031,6 +1079,9 @@ pub fn calibrate_inputs(
             &logs, base, opts,
         )?))),
         "intake" => Ok(Calibrated::Intake(Box::new(intake::calibrate(
+            logs, base, opts,
+        )?))),
+        "turbo" => Ok(Calibrated::Turbo(Box::new(turbo::calibrate(
             logs, base, opts,
         )?))),
         other => Err(CalibrateError::UnknownMonitor(other.to_string())),

@@ -103,11 +103,13 @@ enum Command {
         #[arg(long)]
         allow_long: bool,
     },
-    /// Calibrate the throttle or the intake monitor on fault-free logs of one plant: its
-    /// sensors' noise levels, its model (throttle) or correction range (intake), and every
-    /// residual test's threshold for a false-alarm rate (extreme-value fit to block maxima).
-    /// Writes DIR/fdd.toml and DIR/throttle.toml or DIR/intake.toml for `fdd replay --config
-    /// DIR/fdd.toml`. Refuses logs with a fault in them, or too short for the rate asked.
+    /// Calibrate the throttle, the intake or the air-path monitor on fault-free logs of one
+    /// plant: its sensors' noise levels, its model (throttle), correction range (intake) or
+    /// offset map and residual scales (turbo), and every residual test's threshold for a
+    /// false-alarm rate (extreme-value fit to block maxima). Writes DIR/fdd.toml and
+    /// DIR/throttle.toml, DIR/intake.toml or DIR/turbo.toml (with its parameter file) for
+    /// `fdd replay --config DIR/fdd.toml`. Refuses logs with a fault in them, or too short for
+    /// the rate asked.
     Calibrate {
         /// Fault-free logs, scenario files or directories.
         #[arg(required = true)]
@@ -118,7 +120,8 @@ enum Command {
         /// Runtime configuration to start from (default: the embedded config/fdd.toml).
         #[arg(long)]
         config: Option<PathBuf>,
-        /// False alarms per hour of each test (above 0, at most 3600).
+        /// False alarms per hour of each test (above 0, at most 3600). Throttle and intake only:
+        /// the air-path monitor's thresholds are a margin on the largest fault-free value.
         #[arg(long, default_value_t = 1e-3, allow_negative_numbers = true, value_parser = |s: &str| limits::CALIBRATE_RATE.parse(s))]
         false_alarms_per_hour: f64,
         /// Length of the blocks whose maxima are fitted (s, 0.1 to 86400).
@@ -127,7 +130,7 @@ enum Command {
         /// Keep the starting configuration's throttle model instead of re-identifying it.
         #[arg(long)]
         keep_model: bool,
-        /// The monitor to calibrate (`throttle` or `intake`); default: the one the inputs are
+        /// The monitor to calibrate (`throttle`, `intake` or `turbo`); default: the one the inputs are
         /// for (a scenario's `monitor` key, the monitor whose topics a log carries).
         #[arg(long)]
         monitor: Option<String>,

@@ -1,9 +1,11 @@
 //! The air-path monitor (monitor/src/turbo/): its configuration files load, a fault-free
-//! simulated city drive raises no DTC, and a frame allocates nothing. (Its detection and
-//! isolation figures are not measured yet: the monitor is being built, see the README.)
+//! simulated city drive raises no DTC, a frame allocates nothing, and on the calibrated
+//! TSFS09 monitor file large sensor and leak faults raise a DTC after their onset and none
+//! before. (The figures over the held-out set are `fdd evaluate`'s, in the README.)
 
 use std::path::PathBuf;
 
+use fdd_fixtures::turbo_faults::{TurboFault, TurboFaultSpec};
 use fdd_fixtures::turbo_profile::DriveStyle;
 use fdd_fixtures::turbo_scenario::TurboScenario;
 use fdd_fixtures::turbo_sim::TurboSim;
@@ -108,4 +110,63 @@ fn a_fault_free_city_drive_raises_nothing_and_frames_allocate_nothing() {
         allocations, 0,
         "{allocations} allocations in {counted} steps"
     );
+}
+
+/// A drive of `style` with `fault` from 150 s, on a plant 2 % off the simulator's nominal one.
+fn faulty(name: &str, seed: u64, style: DriveStyle, fault: TurboFault) -> TurboScenario {
+    let mut sc = TurboScenario::new(name, 260.0, seed, style);
+    sc.param_rel_error = 0.02;
+    sc.plant_seed = Some(seed + 1);
+    sc.fault = TurboFaultSpec {
+        fault,
+        start_s: 150.0,
+        end_s: None,
+    };
+    sc
+}
+
+#[test]
+fn large_faults_raise_a_dtc_after_their_onset_and_none_before() {
+    // Seeds outside both scenario sets' ranges (tuning 10_000.., held-out 700_000..).
+    for (sc, events) in [
+        (
+            faulty(
+                "maf",
+                4_100,
+                DriveStyle::City,
+                TurboFault::WafGain { gain_pct: 85 },
+            ),
+            &["turbo_maf_range_performance", "turbo_air_path_group"][..],
+        ),
+        (
+            faulty(
+                "leak",
+                4_200,
+                DriveStyle::City,
+                TurboFault::LeakIm { diameter_mm: 8 },
+            ),
+            &["turbo_intake_leak", "turbo_air_path_group"][..],
+        ),
+    ] {
+        let (failed, _, _) = run(&sc, f64::INFINITY);
+        assert!(
+            failed.iter().all(|(t, _)| *t >= 150.0),
+            "{}: a DTC before the onset: {failed:?}",
+            sc.name
+        );
+        let first = failed
+            .first()
+            .unwrap_or_else(|| panic!("{}: no DTC", sc.name));
+        assert!(
+            first.0 < 200.0,
+            "{}: first DTC at {:.1} s",
+            sc.name,
+            first.0
+        );
+        assert!(
+            events.contains(&first.1.as_str()),
+            "{}: first DTC {first:?}, expected one of {events:?}",
+            sc.name
+        );
+    }
 }

@@ -41,7 +41,8 @@ use fdd_monitor::runtime::Runtime;
 
 use super::{
     block_max, check_extrapolation, fit_threshold, monitor_text, refuse_fault, replay_input,
-    runtime_naming, with_monitor_keys, CalibrateError, CalibrateOptions, TestCalibration,
+    runtime_naming, runtime_with_only, with_monitor_keys, CalibrateError, CalibrateOptions, Only,
+    TestCalibration,
 };
 use crate::replay::{ReplayObserver, RuntimeConfig};
 
@@ -340,16 +341,9 @@ fn runtime_with(
     dir: &Path,
     text: &str,
 ) -> Result<(RuntimeConfig, IntakeConfig), CalibrateError> {
+    let cfg = runtime_with_only(base, dir, text, Only::Intake)?;
     let path = dir.join("intake.toml");
-    std::fs::write(&path, text).map_err(|source| CalibrateError::Write {
-        file: path.clone(),
-        source,
-    })?;
     let parsed = IntakeConfig::parse(text, &path.display().to_string())?;
-    let mut cfg = base.clone();
-    cfg.monitors.intake = true;
-    cfg.monitors.throttle = false;
-    cfg.monitors.intake_config = Some(path);
     Ok((cfg, parsed))
 }
 

@@ -62,6 +62,35 @@ pub struct TurboMonitorConfig {
     /// ... and the tests and the learning wait this long after it (s): the quasi-static balances
     /// hold again once the volumes have filled and the filters have forgotten the transient.
     pub transient_hold_s: f64,
+    /// The tests and the learning also wait while the volumes' filling (or emptying) is more
+    /// than this fraction of the cylinder flow (-): after a tip-out the intercooler empties
+    /// through the closed throttle for seconds, long after the throttle has stopped, and the
+    /// balances are then dominated by the filling term, whose volume and temperature the
+    /// model knows least.
+    pub steady_fill_max: f64,
+    /// The throttle residuals also wait while the boost or the manifold pressure through the
+    /// fast filter is more than this fraction away from the residuals' filter (-): the
+    /// throttle flow at a small opening and a high boost pressure (a tip-out) is where the
+    /// throttle model is least known.
+    pub steady_pressure_max: f64,
+    /// ... and while the intercooler temperature through the residuals' filter is more than
+    /// this from its slow low-pass (K): a charge-air temperature sensor is slow (seconds),
+    /// and after a change of boost it reads the gas of seconds ago; the model's flows scale
+    /// with the temperature (a 20 K lag moves the cylinder flow by 6 %).
+    pub steady_temperature_max_k: f64,
+    /// Nodes of the calibrated offset map (intake manifold pressure over ambient pressure,
+    /// low-passed; strictly increasing): the model's systematic error, which changes with the
+    /// load, as the engine family's fault-free logs show it (`fdd calibrate`). Empty: no map.
+    pub offset_map_load: Vec<f64>,
+    /// The map's value at each node, one `[cylinder_flow, throttle_flow, throttle_cylinder]`
+    /// row per node (relative residuals, -); linear between nodes, constant beyond the ends.
+    /// The learned offsets come on top of it.
+    pub offset_map: Vec<[f64; 3]>,
+    /// Each residual's scale at the map's nodes (rows as `offset_map`, -): the model's error
+    /// differs from engine to engine more at some loads than at others (near full boost
+    /// most), so a test is as sensitive as the model is good where the engine runs. Empty:
+    /// `residual_scale` everywhere.
+    pub scale_map: Vec<[f64; 3]>,
     /// Time constant of the learned residual offsets (s).
     pub adapt_tau_s: f64,
     /// The offsets learn alone for this long after the start of each operation cycle (s)
@@ -75,6 +104,12 @@ pub struct TurboMonitorConfig {
     pub residual_scale: [f64; 3],
     /// Smallest shift each CUSUM is tuned to, in scales.
     pub cusum_min_bias_sigma: f64,
+    /// Smallest fault effect the tests are built for, relative to the cylinder flow (-): a
+    /// 5 % sensor gain error moves a balance by about 5 % of the flow. A CUSUM's reference is
+    /// at least half of it and the offsets go on learning while every deviation is below half
+    /// of it (or `LEARN_BAND` scales): the model's error from engine to engine, which moves
+    /// the residuals by a few percent as the load changes, is neither accumulated nor frozen.
+    pub min_shift: f64,
     /// Threshold of each residual's two-sided CUSUM, in [`RESIDUALS`] order.
     pub cusum_threshold: [f64; 3],
     /// After the first residual alarm, how long the bank goes on collecting frames before it
@@ -83,6 +118,9 @@ pub struct TurboMonitorConfig {
     /// Smallest probability of the best hypothesis among the seven for it to be named (else
     /// the group DTC).
     pub isolation_min_probability: f64,
+    /// A decided fault is taken as gone after this much tested time (s) with no CUSUM rising:
+    /// its events pass again (the DTCs stay stored; a fault still present decides again).
+    pub heal_s: f64,
     /// DTC of a `p_im` sensor gain or offset (range/performance, signal compare failure).
     pub dtc_p_im: String,
     /// DTC of a boost pressure sensor fault.
@@ -120,14 +158,22 @@ impl Default for TurboMonitorConfig {
             throttle_ratio_max: 0.9,
             throttle_rate_max_pct_s: 20.0,
             transient_hold_s: 2.0,
+            steady_fill_max: 0.05,
+            steady_pressure_max: 0.02,
+            steady_temperature_max_k: 1.0,
+            offset_map_load: Vec::new(),
+            offset_map: Vec::new(),
+            scale_map: Vec::new(),
             adapt_tau_s: 5.0,
             adapt_min_s: 15.0,
             adapt_limit: 0.1,
             residual_scale: [0.05, 0.025, 0.05],
             cusum_min_bias_sigma: 1.0,
+            min_shift: 0.05,
             cusum_threshold: [200.0, 200.0, 200.0],
             decision_window_s: 2.0,
             isolation_min_probability: 0.9,
+            heal_s: 10.0,
             dtc_p_im: "P0106-62".into(),
             dtc_p_ic: "P0236-62".into(),
             dtc_maf: "P0101-62".into(),
@@ -146,11 +192,19 @@ const GAP: Range = Range::closed(0.05, 60.0, "s");
 const RATIO: Range = Range::closed(0.1, 1.0, "");
 const RATE: Range = Range::above(0.0, 1e4, "%/s");
 const HOLD: Range = Range::closed(0.0, 60.0, "s");
+const MIN_BIAS: Range = Range::above(0.0, 50.0, "");
+const CUSUM_H: Range = Range::above(0.0, 1e6, "");
+const MIN_SHIFT: Range = Range::closed(0.0, 1.0, "");
+const STEADY_T: Range = Range::above(0.0, 100.0, "K");
+const STEADY: Range = Range::closed(1e-4, 1.0, "");
+const LOAD: Range = Range::closed(0.0, 5.0, "");
+const MAP_VALUE: Range = Range::closed(-1.0, 1.0, "");
 const ADAPT_TAU: Range = Range::closed(0.1, 3600.0, "s");
 const ADAPT_MIN: Range = Range::closed(0.0, 3600.0, "s");
 const ADAPT_LIMIT: Range = Range::closed(0.0, 1.0, "");
 const SCALE: Range = Range::above(0.0, 10.0, "");
 const PROBABILITY: Range = Range::closed(0.0, 1.0, "");
+const HEAL: Range = Range::closed(0.1, 3600.0, "s");
 const WINDOW: Range = Range::closed(0.0, 60.0, "s");
 
 impl TurboMonitorConfig {
@@ -183,25 +237,72 @@ impl TurboMonitorConfig {
             .check(self.throttle_rate_max_pct_s, RATE)?;
         at.key("transient_hold_s")
             .check(self.transient_hold_s, HOLD)?;
+        at.key("steady_fill_max")
+            .check(self.steady_fill_max, STEADY)?;
+        at.key("steady_pressure_max")
+            .check(self.steady_pressure_max, STEADY)?;
+        at.key("steady_temperature_max_k")
+            .check(self.steady_temperature_max_k, STEADY_T)?;
+        for (i, &x) in self.offset_map_load.iter().enumerate() {
+            let k = at.key("offset_map_load").index(i);
+            k.check(x, LOAD)?;
+            if i > 0 && x <= self.offset_map_load[i - 1] {
+                return Err(k.invalid(
+                    crate::config_key::show(x),
+                    format!(
+                        "not above the node before it ({}): the nodes must increase",
+                        self.offset_map_load[i - 1]
+                    ),
+                ));
+            }
+        }
+        if self.offset_map.len() != self.offset_map_load.len() {
+            return Err(at.key("offset_map").invalid(
+                format!("{} rows", self.offset_map.len()),
+                format!(
+                    "offset_map_load has {} nodes: one row per node",
+                    self.offset_map_load.len()
+                ),
+            ));
+        }
+        for (i, row) in self.offset_map.iter().enumerate() {
+            for (j, &v) in row.iter().enumerate() {
+                at.key("offset_map").index(i).index(j).check(v, MAP_VALUE)?;
+            }
+        }
+        if !self.scale_map.is_empty() && self.scale_map.len() != self.offset_map_load.len() {
+            return Err(at.key("scale_map").invalid(
+                format!("{} rows", self.scale_map.len()),
+                format!(
+                    "offset_map_load has {} nodes: one row per node, or none",
+                    self.offset_map_load.len()
+                ),
+            ));
+        }
+        for (i, row) in self.scale_map.iter().enumerate() {
+            for (j, &v) in row.iter().enumerate() {
+                at.key("scale_map").index(i).index(j).check(v, SCALE)?;
+            }
+        }
         at.key("adapt_tau_s").check(self.adapt_tau_s, ADAPT_TAU)?;
         at.key("adapt_min_s").check(self.adapt_min_s, ADAPT_MIN)?;
         at.key("adapt_limit").check(self.adapt_limit, ADAPT_LIMIT)?;
         for (i, &s) in self.residual_scale.iter().enumerate() {
             at.key("residual_scale").index(i).check(s, SCALE)?;
         }
+        // No run-length bound as for the other monitors' CUSUMs: the reference here is at
+        // least half `min_shift` (not a Gaussian design), and no run length is computed.
+        at.key("cusum_min_bias_sigma")
+            .check(self.cusum_min_bias_sigma, MIN_BIAS)?;
         for (i, &h) in self.cusum_threshold.iter().enumerate() {
-            crate::config_key::check_cusum(
-                at,
-                "cusum_min_bias_sigma",
-                self.cusum_min_bias_sigma,
-                &format!("cusum_threshold[{i}]"),
-                h,
-            )?;
+            at.key("cusum_threshold").index(i).check(h, CUSUM_H)?;
         }
+        at.key("min_shift").check(self.min_shift, MIN_SHIFT)?;
         at.key("decision_window_s")
             .check(self.decision_window_s, WINDOW)?;
         at.key("isolation_min_probability")
             .check(self.isolation_min_probability, PROBABILITY)?;
+        at.key("heal_s").check(self.heal_s, HEAL)?;
         at.check_dtcs(&[
             ("dtc_p_im", &self.dtc_p_im),
             ("dtc_p_ic", &self.dtc_p_ic),
@@ -341,6 +442,40 @@ mod tests {
         };
         let e = c.validate(&at).unwrap_err().to_string();
         assert!(e.contains("dtc_leak"), "{e}");
+        // The maps: increasing nodes, one row per node.
+        let c = TurboMonitorConfig {
+            offset_map_load: vec![0.3, 0.3],
+            offset_map: vec![[0.0; 3]; 2],
+            ..Default::default()
+        };
+        let e = c.validate(&at).unwrap_err().to_string();
+        assert!(
+            e.contains("offset_map_load[1]") && e.contains("increase"),
+            "{e}"
+        );
+        let c = TurboMonitorConfig {
+            offset_map_load: vec![0.3, 0.5],
+            offset_map: vec![[0.0; 3]],
+            ..Default::default()
+        };
+        let e = c.validate(&at).unwrap_err().to_string();
+        assert!(
+            e.contains("offset_map") && e.contains("one row per node"),
+            "{e}"
+        );
+        let c = TurboMonitorConfig {
+            offset_map_load: vec![0.3, 0.5],
+            offset_map: vec![[0.0; 3]; 2],
+            scale_map: vec![[0.01; 3], [0.01, 0.0, 0.01]],
+            ..Default::default()
+        };
+        let e = c.validate(&at).unwrap_err().to_string();
+        assert!(e.contains("scale_map[1][1]"), "{e}");
+        let c = TurboMonitorConfig {
+            scale_map: vec![[0.01; 3], [0.01; 3]],
+            ..c
+        };
+        c.validate(&at).expect("a valid map");
         let e = TurboConfig::parse(
             "params = \"p.toml\"\n[monitor]\nfilter_tau = 1.0\n",
             "t.toml",

@@ -19,35 +19,50 @@
 //! `filter_tau_s`) and the volumes' filling is subtracted through the same filter: for a
 //! first-order low-pass `F`, `F(dM/dt) = (M - F(M)) / tau`, so the filtered filling of the
 //! manifold is `V_im / (R T_ic) (p_im - F(p_im)) / tau` without differentiating a noisy
-//! reading (the manifold's in `W_af - W_cyl` and `W_thr - W_cyl`, the intercooler's in
-//! `W_af - W_thr`: each residual keeps the sensors it already had). Each is divided by the
-//! filtered cylinder flow (at least `flow_floor_kg_s`): relative residuals.
+//! reading (both volumes' in `W_af - W_cyl`, the manifold's in `W_thr - W_cyl`, the
+//! intercooler's in `W_af - W_thr`). Each is divided by the filtered cylinder flow (at least
+//! `flow_floor_kg_s`): relative residuals.
 //!
-//! # Learned offsets
+//! # When a residual is tested
 //!
-//! The model is not the engine: each relative residual has an offset that differs from engine
-//! to engine and from drive to drive (on the LiU-ICE logs up to 6 % between the fault-free run
-//! and the fault runs before their faults). Like an ECU's adaptation values, the offsets are
-//! learned: for `adapt_min_s` after the start of each operation cycle with time constant
-//! `adapt_tau_s` and no test, then ten times slower and only while every normalized residual is
-//! within [`LEARN_BAND`] scales and no alarm is pending. An offset is bounded by `adapt_limit`:
-//! a residual that needs more is not adapted away.
+//! The balances are quasi-static: they hold once the volumes have (nearly) stopped filling.
+//! A residual is tested and learns only while the throttle has been still for
+//! `transient_hold_s`, the filling through a fast filter ([`FAST_TAU_S`]) is at most
+//! `steady_fill_max` of the flow, and the slow charge-air temperature reading has caught up
+//! (`steady_temperature_max_k`); the throttle residuals also need a metering throttle
+//! (`throttle_ratio_max`) and steady pressures (`steady_pressure_max`).
+//!
+//! # Offsets: a calibrated map and learned values
+//!
+//! The model is not the engine. Its systematic error along the load `p_im / p_amb` (the
+//! engine family's, from fault-free logs by `fdd calibrate`) is the offset map
+//! (`offset_map_load`, `offset_map`); what differs from engine to engine and drive to drive
+//! (on the LiU-ICE logs up to 6 % between runs) is learned on top, like an ECU's adaptation
+//! values: each residual's offset learns with time constant `adapt_tau_s` for its first
+//! `adapt_min_s` of tested time in an operation cycle (its test waits), then ten times slower
+//! and only while every deviation is below `max(LEARN_BAND scales, min_shift / 2)` and no
+//! alarm is pending. An offset is bounded by `adapt_limit`.
 //!
 //! # Tests and decisions
 //!
-//! `z = (relative residual - offset) / residual_scale`, a two-sided CUSUM per residual with
-//! reference `cusum_min_bias_sigma / 2` and threshold `cusum_threshold` (reported every frame
-//! on `/fdd/tests` as `turbo_<residual>`). The hypothesis bank collects every steady frame
-//! (all three residuals tested) since the CUSUMs were last all zero, so that it holds the
-//! frames since about the fault's onset: each frame's balances against their learned offsets
-//! (in kg/s) with the residual scales as their deviations. The first alarm opens an episode;
-//! after `decision_window_s` the bank fits each single-fault hypothesis (a gain on `p_ic`,
-//! `p_im` or the MAF, a bias on `T_ic`, a leak before or after the throttle, the throttle's
-//! area) and the best is named when its probability among them is at least
-//! `isolation_min_probability`; otherwise the group DTC carries the three best as candidates.
-//! A leak before and a leak after the throttle share the leak DTC (the candidates say which).
-//! A named fault stays failed for the operation cycle; the tests start again from zero after a
-//! decision.
+//! `z = (relative residual - map - offset) / scale`, the scale from `scale_map` at the load
+//! (else `residual_scale`): a two-sided CUSUM per residual with reference
+//! `max(cusum_min_bias_sigma / 2, min_shift / (2 scale))` (deviations below half the smallest
+//! fault the tests are built for, or below the model's own spread at that load, do not
+//! accumulate) and threshold `cusum_threshold` (reported every frame on `/fdd/tests` as
+//! `turbo_<residual>`). The hypothesis bank collects the frames in which the cylinder
+//! residual was tested since the CUSUMs were last all zero (about the fault's onset): each
+//! frame's balances against map and offsets (in kg/s), with `max(scale, min_shift / 2)` as
+//! their deviations (the throttle balances' widened [`UNTESTED_SIGMA`] times in a frame in
+//! which they were not tested). The first alarm opens an episode; after `decision_window_s`
+//! the bank fits each single-fault hypothesis (a gain on `p_ic`, `p_im` or the MAF, a bias on
+//! `T_ic`, a leak before or after the throttle, the throttle's area) and the best is named when
+//! its probability among them is at least `isolation_min_probability`; otherwise the group DTC
+//! carries the three best as candidates. A leak before and a leak after the throttle share the
+//! leak DTC (the candidates say which). A named fault stays failed for the operation cycle;
+//! the tests start again from zero after a decision. The diagnosis (`fdd evaluate`'s samples)
+//! is flagged while an episode is open or a decided fault stands, with the bank's
+//! probabilities at the decision as scores.
 
 pub mod config;
 
@@ -70,6 +85,9 @@ pub use config::{TurboConfig, TurboMonitorConfig, RESIDUALS};
 /// While learning after the start phase, every normalized residual must be within this many
 /// scales.
 pub const LEARN_BAND: f64 = 1.5;
+/// How much wider the throttle balances' deviations are made in a frame in which they were
+/// not tested (the bank then learns from the cylinder balance alone).
+pub const UNTESTED_SIGMA: f64 = 1e3;
 /// How much slower the offsets learn after the start phase.
 pub const TRACK_SLOWDOWN: f64 = 10.0;
 
@@ -145,13 +163,64 @@ impl Cusum {
     }
 }
 
+/// Time constant of the fast low-pass of the pressures that the steadiness condition compares
+/// with the residuals' filter (s): fast enough to follow a filling volume, slow enough that
+/// the sensors' noise does not look like one.
+pub const FAST_TAU_S: f64 = 0.2;
+
+/// Time constant of the slow low-pass of the intercooler temperature (s): about a slow
+/// temperature sensor's own lag (a thermistor in the charge air), so that the difference
+/// from the residuals' filter measures how far the reading still is from the gas after a
+/// change of load (see `steady_temperature_max_k`).
+pub const SLOW_TEMPERATURE_TAU_S: f64 = 5.0;
+
+/// Names of the estimates the monitor also reports each frame (what `fdd calibrate` collects,
+/// in [`RESIDUALS`] order): each relative residual's deviation from the offset map and the
+/// learned offset (what its test sees, before the scale; NaN when not tested), each learned
+/// offset (-), and the load the map is read at (`p_im / p_amb`, low-passed).
+pub const RESIDUAL_ESTIMATES: [&str; 7] = [
+    "residual_cylinder_flow",
+    "residual_throttle_flow",
+    "residual_throttle_cylinder",
+    "offset_cylinder_flow",
+    "offset_throttle_flow",
+    "offset_throttle_cylinder",
+    "intake_load",
+];
+
 /// First-order low-pass state.
 #[derive(Debug, Clone, Copy)]
 struct Filters {
     raw: [f64; 3],
     p_im: f64,
     p_ic: f64,
+    /// The pressures through the fast low-pass ([`FAST_TAU_S`]).
+    p_im_fast: f64,
+    p_ic_fast: f64,
+    /// The intercooler temperature through the residuals' filter and the slow one
+    /// ([`SLOW_TEMPERATURE_TAU_S`]).
+    t_ic: f64,
+    t_ic_slow: f64,
     w_cyl: f64,
+}
+
+/// A calibrated map (offsets or scales) at `load` (linear between nodes, constant beyond the
+/// ends; zero without nodes).
+pub fn map_offset(nodes: &[f64], values: &[[f64; 3]], load: f64) -> [f64; 3] {
+    let n = nodes.len().min(values.len());
+    if n == 0 {
+        return [0.0; 3];
+    }
+    if !(load > nodes[0]) {
+        return values[0];
+    }
+    if load >= nodes[n - 1] {
+        return values[n - 1];
+    }
+    let k = nodes[..n].partition_point(|&x| x <= load).clamp(1, n - 1);
+    let (x0, x1) = (nodes[k - 1], nodes[k]);
+    let w = (load - x0) / (x1 - x0);
+    std::array::from_fn(|i| values[k - 1][i] + w * (values[k][i] - values[k - 1][i]))
 }
 
 /// The air-path monitor (see the module docs). No heap allocation per frame.
@@ -166,9 +235,12 @@ pub struct TurboMonitor {
     v_im_r: f64,
     v_ic_r: f64,
     last_t_ns: Option<u64>,
-    cycle_start_s: Option<f64>,
     filters: Option<Filters>,
     offsets: [f64; 3],
+    /// Steady time (s) each offset has learned in this operation cycle.
+    learned_s: [f64; 3],
+    /// Tested time (s) without a rising CUSUM since the last decision.
+    healthy_s: f64,
     /// Time (s) each residual has been enabled without a break (the throttle residuals need
     /// a throttle that meters, see `throttle_ratio_max`).
     enabled_s: [f64; 3],
@@ -187,6 +259,9 @@ pub struct TurboMonitor {
     ev_cands: [[(&'static str, f64); 3]; EVENTS],
     ev_ncand: [usize; EVENTS],
     estimates: [f64; 2],
+    /// The diagnosis scores per [`FAULT_CLASSES`]: the bank's probabilities at the last
+    /// decision of the operation cycle (0 before any).
+    scores: [f64; FAULT_CLASSES.len()],
     frames: u64,
     events: MonitorEvents,
 }
@@ -244,9 +319,10 @@ impl TurboMonitor {
             v_ic_r: p.intercooler_volume_m3 / p.air_gas_constant_j_per_kg_k,
             inputs,
             last_t_ns: None,
-            cycle_start_s: None,
             filters: None,
             offsets: [0.0; 3],
+            learned_s: [0.0; 3],
+            healthy_s: 0.0,
             enabled_s: [0.0; 3],
             last_throttle: f64::NAN,
             hold_until_s: f64::NEG_INFINITY,
@@ -259,6 +335,7 @@ impl TurboMonitor {
             ev_cands: [[("", 0.0); 3]; EVENTS],
             ev_ncand: [0; EVENTS],
             estimates: [f64::NAN; 2],
+            scores: [0.0; FAULT_CLASSES.len()],
             frames: 0,
             events,
             model,
@@ -277,6 +354,7 @@ impl TurboMonitor {
     }
 
     fn reset_tests(&mut self) {
+        self.healthy_s = 0.0;
         self.bank.reset();
         self.cusum = [Cusum::default(); 3];
         self.alarmed = [0; 3];
@@ -289,11 +367,12 @@ impl TurboMonitor {
         self.enabled_s = [0.0; 3];
         self.last_throttle = f64::NAN;
         self.hold_until_s = f64::NEG_INFINITY;
-        self.cycle_start_s = None;
         self.offsets = [0.0; 3];
+        self.learned_s = [0.0; 3];
         self.reset_tests();
         self.ev_result = [TestResult::NOT_TESTED; EVENTS];
         self.ev_ncand = [0; EVENTS];
+        self.scores = [0.0; FAULT_CLASSES.len()];
         self.last_t_ns = None;
     }
 
@@ -326,6 +405,7 @@ impl TurboMonitor {
                     result: TestResult::NOT_TESTED,
                 });
             }
+            self.emit_diagnosis(out);
             return;
         }
         if dt.is_finite()
@@ -356,6 +436,11 @@ impl TurboMonitor {
                 }
                 f.p_im += a * (r.p_im_pa - f.p_im);
                 f.p_ic += a * (r.p_ic_pa - f.p_ic);
+                let af = (dt / FAST_TAU_S).min(1.0);
+                f.p_im_fast += af * (r.p_im_pa - f.p_im_fast);
+                f.p_ic_fast += af * (r.p_ic_pa - f.p_ic_fast);
+                f.t_ic += a * (r.t_ic_k - f.t_ic);
+                f.t_ic_slow += (dt / SLOW_TEMPERATURE_TAU_S).min(1.0) * (r.t_ic_k - f.t_ic_slow);
                 f.w_cyl += a * (b.w_cyl_kg_s - f.w_cyl);
                 f
             }
@@ -367,47 +452,93 @@ impl TurboMonitor {
                     raw: b.residuals,
                     p_im: r.p_im_pa,
                     p_ic: r.p_ic_pa,
+                    p_im_fast: r.p_im_pa,
+                    p_ic_fast: r.p_ic_pa,
+                    t_ic: r.t_ic_k,
+                    t_ic_slow: r.t_ic_k,
                     w_cyl: b.w_cyl_kg_s,
                 }
             }
         };
         self.filters = Some(f);
-        let start = *self.cycle_start_s.get_or_insert(t_s);
         let fill_im = self.v_im_r / r.t_ic_k * (r.p_im_pa - f.p_im) / tau;
         let fill_ic = self.v_ic_r / r.t_ic_k * (r.p_ic_pa - f.p_ic) / tau;
         let reference = f.w_cyl.max(self.cfg.flow_floor_kg_s);
+        // The volumes' filling, through the fast filter (not the sensors' noise), is small
+        // against the flow, and the charge-air temperature reading has caught up (see
+        // `steady_fill_max`, `steady_temperature_max_k`).
+        let filling = (self.v_im_r * (f.p_im_fast - f.p_im).abs()
+            + self.v_ic_r * (f.p_ic_fast - f.p_ic).abs())
+            / (r.t_ic_k * tau);
+        let steady = steady
+            && filling <= self.cfg.steady_fill_max * reference
+            && (f.t_ic - f.t_ic_slow).abs() <= self.cfg.steady_temperature_max_k;
+        // The throttle residuals also wait for steady pressures (`steady_pressure_max`).
+        let eps = self.cfg.steady_pressure_max;
+        let pressures = (f.p_im_fast - f.p_im).abs() <= eps * f.p_im
+            && (f.p_ic_fast - f.p_ic).abs() <= eps * f.p_ic;
+        let steady_r = [steady, steady && pressures, steady && pressures];
+        let load = f.p_im / u.ambient_pressure_pa;
+        let base = map_offset(&self.cfg.offset_map_load, &self.cfg.offset_map, load);
+        let scale = if self.cfg.scale_map.is_empty() {
+            self.cfg.residual_scale
+        } else {
+            map_offset(&self.cfg.offset_map_load, &self.cfg.scale_map, load)
+        };
         let mut rel = [0.0; 3];
-        rel[R_CYL] = (f.raw[R_CYL] - fill_im) / reference;
-        rel[R_THR] = (f.raw[R_THR] - fill_ic) / reference;
-        rel[R_TC] = (f.raw[R_TC] - fill_im) / reference;
-        let z: [f64; 3] =
-            std::array::from_fn(|i| (rel[i] - self.offsets[i]) / self.cfg.residual_scale[i]);
-        let learning_phase = t_s - start < self.cfg.adapt_min_s;
-        // A residual counts once its filter has run a time constant since it was enabled.
+        rel[R_CYL] = (f.raw[R_CYL] - fill_im - fill_ic) / reference - base[R_CYL];
+        rel[R_THR] = (f.raw[R_THR] - fill_ic) / reference - base[R_THR];
+        rel[R_TC] = (f.raw[R_TC] - fill_im) / reference - base[R_TC];
+        let z: [f64; 3] = std::array::from_fn(|i| (rel[i] - self.offsets[i]) / scale[i]);
+        // A residual counts once its filter has run a time constant since it was enabled, and
+        // is tested once its offset has learned for `adapt_min_s` of steady frames.
         let settled: [bool; 3] = std::array::from_fn(|i| self.enabled_s[i] >= tau);
+        let learning: [bool; 3] = std::array::from_fn(|i| self.learned_s[i] < self.cfg.adapt_min_s);
+        let learning_phase = learning[R_CYL];
         let quiet = self.episode_start_s.is_none()
-            && (0..3).all(|i| !settled[i] || z[i].abs() < LEARN_BAND);
-        if steady && (learning_phase || quiet) {
-            let tau_a = if learning_phase {
-                self.cfg.adapt_tau_s
-            } else {
-                self.cfg.adapt_tau_s * TRACK_SLOWDOWN
-            };
-            let a = (dt.min(self.cfg.max_frame_gap_s) / tau_a).min(1.0);
+            && (0..3).all(|i| {
+                !settled[i]
+                    || learning[i]
+                    || z[i].abs() * scale[i] < (LEARN_BAND * scale[i]).max(0.5 * self.cfg.min_shift)
+            });
+        {
+            let step = dt.min(self.cfg.max_frame_gap_s);
             let lim = self.cfg.adapt_limit;
-            for i in (0..3).filter(|&i| settled[i]) {
+            for i in (0..3).filter(|&i| steady_r[i] && settled[i] && (learning[i] || quiet)) {
+                let tau_a = if learning[i] {
+                    self.learned_s[i] += step;
+                    self.cfg.adapt_tau_s
+                } else {
+                    self.cfg.adapt_tau_s * TRACK_SLOWDOWN
+                };
+                let a = (step / tau_a).min(1.0);
                 self.offsets[i] =
                     (self.offsets[i] + a * (rel[i] - self.offsets[i])).clamp(-lim, lim);
             }
         }
-        let k = 0.5 * self.cfg.cusum_min_bias_sigma;
+        // The reference: half the smallest shift the tests are built for, in scales, and at
+        // least half `cusum_min_bias_sigma` (deviations the model error makes at every load
+        // do not accumulate).
+        let k: [f64; 3] = std::array::from_fn(|i| {
+            (0.5 * self.cfg.cusum_min_bias_sigma).max(0.5 * self.cfg.min_shift / scale[i])
+        });
         let mut alarm = None;
+        let mut residuals = [
+            f64::NAN,
+            f64::NAN,
+            f64::NAN,
+            self.offsets[0],
+            self.offsets[1],
+            self.offsets[2],
+            load,
+        ];
         for i in 0..3 {
             let h = self.cfg.cusum_threshold[i];
-            let result = if learning_phase || !settled[i] || !steady {
+            let result = if learning[i] || !settled[i] || !steady_r[i] {
                 TestResult::NOT_TESTED
             } else {
-                self.cusum[i].step(z[i], k);
+                residuals[i] = z[i] * scale[i];
+                self.cusum[i].step(z[i], k[i]);
                 let v = self.cusum[i].value();
                 let verdict = if v > h {
                     Verdict::Failed
@@ -437,21 +568,31 @@ impl TurboMonitor {
                 result,
             });
         }
-        // The bank holds the steady frames since the CUSUMs were last all zero (about the
-        // onset of whatever they are accumulating).
-        let tested = steady && !learning_phase && settled.iter().all(|&s| s);
+        // The bank holds the frames since the CUSUMs were last all zero (about the onset of
+        // whatever they are accumulating) in which the cylinder-flow residual was tested; the
+        // throttle balances count only where they were tested too (elsewhere their deviations
+        // are made [`UNTESTED_SIGMA`] times wider: no information).
+        let tested: [bool; 3] = std::array::from_fn(|i| steady_r[i] && settled[i] && !learning[i]);
+        let widen = if tested[R_THR] && tested[R_TC] {
+            1.0
+        } else {
+            UNTESTED_SIGMA
+        };
         if self.episode_start_s.is_none() && self.cusum.iter().all(|c| c.value() == 0.0) {
             self.bank.reset();
-        } else if tested {
+        } else if tested[R_CYL] {
             let frame = IsolationFrame {
                 readings: *r,
                 input: *u,
                 exhaust: ExhaustPressure::Ambient,
                 baseline_kg_s: [
-                    self.offsets[R_CYL] * reference,
-                    self.offsets[R_THR] * reference,
+                    (base[R_CYL] + self.offsets[R_CYL]) * reference,
+                    (base[R_THR] + self.offsets[R_THR]) * reference,
                 ],
-                sigma_kg_s: std::array::from_fn(|i| self.cfg.residual_scale[i] * reference),
+                sigma_kg_s: std::array::from_fn(|i| {
+                    let w = if i == R_CYL { 1.0 } else { widen };
+                    w * scale[i].max(0.5 * self.cfg.min_shift) * reference
+                }),
             };
             // A frame the bank refuses (a reading it cannot linearize) is left out.
             let _ = self.bank.push(&frame);
@@ -466,6 +607,20 @@ impl TurboMonitor {
             if t_s - e0 >= self.cfg.decision_window_s {
                 self.decide_episode();
                 self.reset_tests();
+            }
+        } else if self.ev_result.iter().any(|r| r.verdict == Verdict::Failed) {
+            // A decided fault is gone once the cylinder residual has been tested for `heal_s`
+            // with no CUSUM rising (a fault still there makes them rise again and decides
+            // again): its events pass (the DTCs stay stored).
+            if self.cusum.iter().any(|c| c.value() > 0.0) {
+                self.healthy_s = 0.0;
+            } else if tested[R_CYL] {
+                self.healthy_s += dt.min(self.cfg.max_frame_gap_s);
+                if self.healthy_s >= self.cfg.heal_s {
+                    self.ev_result = [TestResult::NOT_TESTED; EVENTS];
+                    self.ev_ncand = [0; EVENTS];
+                    self.scores = [0.0; FAULT_CLASSES.len()];
+                }
             }
         }
         let now_s = t_s;
@@ -503,6 +658,28 @@ impl TurboMonitor {
                 source: "model at the readings",
             });
         }
+        for (name, value) in RESIDUAL_ESTIMATES.iter().zip(residuals) {
+            out(Output::Estimate {
+                name,
+                value,
+                lower: f64::NAN,
+                upper: f64::NAN,
+                source: "relative residual",
+            });
+        }
+        self.emit_diagnosis(out);
+    }
+
+    /// Flagged while an episode is open (not yet named: scores 0) or while a decided fault
+    /// stands (the bank's probabilities at its decision).
+    fn emit_diagnosis(&self, out: &mut OutputSink<'_>) {
+        let decided = self.ev_result.iter().any(|r| r.verdict == Verdict::Failed);
+        let flagged = decided || self.episode_start_s.is_some();
+        let none = [0.0; FAULT_CLASSES.len()];
+        out(Output::Diagnosis {
+            flagged,
+            scores: if decided { &self.scores } else { &none },
+        });
     }
 
     fn decide_episode(&mut self) {
@@ -511,6 +688,13 @@ impl TurboMonitor {
             ..self.episode_result
         };
         let fits = self.bank.fits();
+        self.scores = [0.0; FAULT_CLASSES.len()];
+        for f in &fits {
+            let class = hypothesis_event(f.hypothesis).1;
+            if let Some(i) = FAULT_CLASSES.iter().position(|c| *c == class) {
+                self.scores[i] += f.probability;
+            }
+        }
         let best = fits[0];
         if self.bank.frames() > 0 && best.probability >= self.cfg.isolation_min_probability {
             let (event, class) = hypothesis_event(best.hypothesis);
@@ -634,12 +818,34 @@ impl Monitor for TurboMonitor {
         self.reset_tests();
         self.ev_result = [TestResult::NOT_TESTED; EVENTS];
         self.ev_ncand = [0; EVENTS];
+        self.scores = [0.0; FAULT_CLASSES.len()];
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_maps_interpolate_between_nodes_and_hold_beyond_them() {
+        let nodes = [0.3, 0.5, 1.0];
+        let rows = [[0.0, 1.0, -1.0], [0.2, 1.0, 1.0], [0.4, 0.0, 1.0]];
+        assert_eq!(map_offset(&[], &[], 0.7), [0.0; 3]);
+        assert_eq!(map_offset(&nodes, &rows, 0.1), rows[0]);
+        assert_eq!(map_offset(&nodes, &rows, 0.3), rows[0]);
+        assert_eq!(map_offset(&nodes, &rows, 2.0), rows[2]);
+        assert_eq!(map_offset(&nodes, &rows, f64::NAN), rows[0]);
+        let m = map_offset(&nodes, &rows, 0.4);
+        for (got, want) in m.iter().zip([0.1, 1.0, 0.0]) {
+            assert!((got - want).abs() < 1e-12, "{m:?}");
+        }
+        let m = map_offset(&nodes, &rows, 0.75);
+        for (got, want) in m.iter().zip([0.3, 0.5, 1.0]) {
+            assert!((got - want).abs() < 1e-12, "{m:?}");
+        }
+        // Exactly at an inner node: its row.
+        assert_eq!(map_offset(&nodes, &rows, 0.5), rows[1]);
+    }
 
     #[test]
     fn every_hypothesis_has_an_event_and_a_scored_class() {

@@ -1,0 +1,135 @@
+//! `fdd calibrate` for the air-path monitor: on simulated fault-free drives it writes a
+//! monitor file with an offset map, scales per load and thresholds, which `fdd replay
+//! --config` loads and which calibrates to itself; a drive with a fault in it is refused,
+//! naming the file and the fault.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn fdd() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_fdd"));
+    c.env_remove("RUST_LOG").env_remove("RUST_BACKTRACE");
+    c
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// `fdd` with `args`, which must succeed; its standard output.
+fn ok(args: &[&std::ffi::OsStr]) -> String {
+    let out = fdd().args(args).output().expect("run");
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{args:?}: {text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
+
+/// A fault-free city drive of `duration_s` (and a fault from 100 s when `fault` is given),
+/// simulated into `dir`; the log's path.
+fn drive(dir: &Path, name: &str, seed: u64, duration_s: f64, fault: &str) -> PathBuf {
+    let sc = dir.join(format!("turbo_{name}.toml"));
+    std::fs::write(
+        &sc,
+        format!(
+            "name = \"turbo_{name}\"\nmonitor = \"turbo\"\nduration_s = {duration_s:.1}\nseed = {seed}\n\
+             [profile]\nstyle = \"city\"\n[plant]\nparam_rel_error = 0.02\nseed = {}\n{fault}",
+            seed + 1
+        ),
+    )
+    .expect("write scenario");
+    let log = dir.join(format!("turbo_{name}.mcap"));
+    ok(&[
+        "simulate".as_ref(),
+        sc.as_os_str(),
+        "-o".as_ref(),
+        log.as_os_str(),
+    ]);
+    log
+}
+
+fn calibrate(logs: &[&Path], config: &Path, out: &Path) -> String {
+    let mut args: Vec<&std::ffi::OsStr> = vec!["calibrate".as_ref()];
+    args.extend(logs.iter().map(|l| l.as_os_str()));
+    args.extend([
+        "--config".as_ref(),
+        config.as_os_str(),
+        "-o".as_ref(),
+        out.as_os_str(),
+    ]);
+    ok(&args)
+}
+
+#[test]
+fn turbo_calibration_writes_maps_that_calibrate_to_themselves_and_refuses_a_fault() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let a = drive(dir.path(), "a", 91_001, 1200.0, "");
+    let b = drive(dir.path(), "b", 91_011, 1200.0, "");
+    let sim = root().join("config/fdd_turbo_sim.toml");
+    let first = dir.path().join("first");
+    let report = calibrate(&[&a, &b], &sim, &first);
+    for words in [
+        "offset map",
+        "scales",
+        "turbo_cylinder_flow",
+        "turbo_throttle_flow",
+    ] {
+        assert!(report.contains(words), "{report}");
+    }
+    let written = std::fs::read_to_string(first.join("turbo.toml")).expect("turbo.toml");
+    let cfg = fdd_monitor::turbo::TurboConfig::load(Some(&first.join("turbo.toml")))
+        .expect("the written monitor file loads with its parameter file");
+    let m = &cfg.monitor;
+    assert!(m.offset_map_load.len() >= 3, "{:?}", m.offset_map_load);
+    assert_eq!(m.scale_map.len(), m.offset_map_load.len());
+    // The scales are the model's error here, far below the uncalibrated defaults, and every
+    // threshold is above the floor.
+    for (s, start) in m.residual_scale.iter().zip([0.065, 0.03, 0.07]) {
+        assert!(*s > 0.0 && *s < start, "{:?}", m.residual_scale);
+    }
+    assert!(
+        m.cusum_threshold.iter().all(|&h| h >= 10.0),
+        "{:?}",
+        m.cusum_threshold
+    );
+
+    // The written runtime configuration replays a log.
+    let replay = ok(&[
+        "replay".as_ref(),
+        a.as_os_str(),
+        "--config".as_ref(),
+        first.join("fdd.toml").as_os_str(),
+    ]);
+    assert!(replay.contains("turbo"), "{replay}");
+
+    // Calibrating from the calibrated file gives it back.
+    let second = dir.path().join("second");
+    calibrate(&[&a, &b], &first.join("fdd.toml"), &second);
+    let again = std::fs::read_to_string(second.join("turbo.toml")).expect("turbo.toml");
+    assert_eq!(again, written, "a calibrated file calibrates to itself");
+
+    // A drive with a fault is refused, naming it.
+    let f = drive(
+        dir.path(),
+        "f",
+        91_021,
+        200.0,
+        "[fault]\nkind = \"waf_gain\"\ngain = 0.9\nstart_s = 100.0\n",
+    );
+    let out = fdd()
+        .args([
+            "calibrate".as_ref(),
+            f.as_os_str(),
+            "--config".as_ref(),
+            sim.as_os_str(),
+        ])
+        .args(["-o".as_ref(), dir.path().join("refused").as_os_str()])
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("f.mcap") && err.contains("waf_gain"), "{err}");
+}
