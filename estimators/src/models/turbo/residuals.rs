@@ -117,8 +117,6 @@ pub struct FlowBalance {
     pub w_cyl_kg_s: f64,
     /// Throttle flow from `p_ic`, `p_im` and the throttle (kg/s).
     pub w_thr_kg_s: f64,
-    /// Whether the throttle is choked (its flow independent of `p_im`).
-    pub choked: bool,
     /// `[W_af - W_cyl, W_af - W_thr, W_thr - W_cyl]` (kg/s), rows of [`SIGNATURE`].
     pub residuals: [f64; 3],
 }
@@ -180,16 +178,26 @@ pub fn flow_balance(
     let s: TurboSignals = model.signals(&x, u);
     let w_cyl = s.w_ei_kg_s;
     let w_thr = s.w_thr_kg_s;
-    // Choked: the throttle's flow does not move with p_im (its derivative by the manifold
-    // mass is zero).
-    let g = model.signals_with_gradient(&x, u);
-    let choked = g.w_thr_kg_s.d[super::X_M_IM] == 0.0;
     FlowBalance {
         w_cyl_kg_s: w_cyl,
         w_thr_kg_s: w_thr,
-        choked,
         residuals: [r.maf_kg_s - w_cyl, r.maf_kg_s - w_thr, w_thr - w_cyl],
     }
+}
+
+/// Whether the throttle is choked at the readings: its flow does not move with `p_im` (its
+/// derivative by the manifold mass is zero), so `r_thr` leaves the `p_im` sensor out
+/// ([`SIGNATURE`]'s 1 entries). Computes the model's gradient: a separate call from
+/// [`flow_balance`], which the monitor runs every frame without needing it.
+pub fn throttle_choked(
+    model: &TurboModel,
+    r: &IntakeReadings,
+    u: &TurboInput,
+    exhaust: &ExhaustPressure,
+) -> bool {
+    let x = reading_state(model, r, u, exhaust);
+    let g = model.signals_with_gradient(&x, u);
+    g.w_thr_kg_s.d[super::X_M_IM] == 0.0
 }
 
 #[cfg(test)]
@@ -252,7 +260,7 @@ mod tests {
                     let moved = (bf.residuals[row] - b.residuals[row]).abs() > 1e-3 * scale;
                     let expected = match sig[sensor] {
                         0 => false,
-                        1 => !b.choked,
+                        1 => !throttle_choked(&m, &r, &u, &ex),
                         _ => true,
                     };
                     assert_eq!(
