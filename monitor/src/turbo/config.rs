@@ -93,16 +93,17 @@ pub struct TurboMonitorConfig {
     pub scale_map: Vec<[f64; 3]>,
     /// Time constant of the learned residual offsets (s).
     pub adapt_tau_s: f64,
-    /// The offsets learn alone for this long after the start of each operation cycle (s)
-    /// before the tests start.
+    /// Each offset learns alone (at `adapt_tau_s`) for this much of its residual's tested
+    /// time in an operation cycle (s) before its test starts; then ten times slower.
     pub adapt_min_s: f64,
     /// Largest learned offset of a relative residual (-): a residual that would need more is a
     /// fault, not an adaptation.
     pub adapt_limit: f64,
     /// Scale of each relative residual (its fault-free standard deviation after the offset),
-    /// in [`RESIDUALS`] order.
+    /// in [`RESIDUALS`] order; `scale_map`, when given, replaces it.
     pub residual_scale: [f64; 3],
-    /// Smallest shift each CUSUM is tuned to, in scales.
+    /// Twice the smallest CUSUM reference, in scales (the reference is also at least half
+    /// `min_shift`).
     pub cusum_min_bias_sigma: f64,
     /// Smallest fault effect the tests are built for, relative to the cylinder flow (-): a
     /// 5 % sensor gain error moves a balance by about 5 % of the flow. A CUSUM's reference is
