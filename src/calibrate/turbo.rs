@@ -103,12 +103,13 @@ struct Collector {
     /// This frame's deviations, offsets and load (the estimates in [`RESIDUAL_ESTIMATES`]
     /// order), complete when the load arrives.
     frame: [f64; 7],
-    /// Per log and residual: sum and count of the relative residual (pass 1).
-    log_sum: [f64; 3],
-    log_n: [u64; 3],
-    /// Per residual: (deviation, learned offset, load, log index) of tested frames.
-    samples: [Vec<(f64, f64, f64, usize)>; 3],
-    log_means: Vec<[f64; 3]>,
+    /// Per log (one entry each, a few hundred bytes: memory does not grow with a log's
+    /// length), per residual: sum and count of the relative residual ...
+    log_totals: Vec<[(f64, u64); 3]>,
+    /// ... and per node of [`MAP_NODES`] its weighted sum and weight.
+    log_nodes: Vec<NodeSums>,
+    /// Per node and residual: the weighted sum of squared deviations and the weight (pass 2).
+    dev_nodes: NodeSums,
     /// Per residual: sum of squares and count of tested deviations (pass 2).
     dev_sq: [f64; 3],
     dev_n: [u64; 3],
@@ -128,10 +129,9 @@ impl Collector {
         Self {
             block_ns: (block_s * 1e9) as u64,
             frame: [f64::NAN; 7],
-            log_sum: [0.0; 3],
-            log_n: [0; 3],
-            samples: Default::default(),
-            log_means: Vec::new(),
+            log_totals: Vec::new(),
+            log_nodes: Vec::new(),
+            dev_nodes: NodeSums::default(),
             dev_sq: [0.0; 3],
             dev_n: [0; 3],
             largest_offset: 0.0,
@@ -149,19 +149,62 @@ impl Collector {
     fn take_frame(&mut self) {
         let load = self.frame[6];
         for i in 0..3 {
-            let (dev, off) = (self.frame[i], self.frame[3 + i]);
-            if !(dev.is_finite() && off.is_finite() && load.is_finite()) {
-                continue;
-            }
-            let rel = dev + off;
-            self.log_sum[i] += rel;
-            self.log_n[i] += 1;
-            self.samples[i].push((dev, off, load, self.log_index));
-            self.dev_sq[i] += dev * dev;
-            self.dev_n[i] += 1;
-            self.largest_offset = self.largest_offset.max(off.abs());
+            self.add(i, self.frame[i], self.frame[3 + i], load);
         }
         self.frame = [f64::NAN; 7];
+    }
+
+    /// A new log's accumulators.
+    fn start_log(&mut self) {
+        self.log_totals.push([(0.0, 0); 3]);
+        self.log_nodes.push(NodeSums::default());
+    }
+
+    /// One tested frame of residual `i` in the current log: its deviation, learned offset and
+    /// load.
+    fn add(&mut self, i: usize, dev: f64, off: f64, load: f64) {
+        if !(dev.is_finite() && off.is_finite() && load.is_finite()) {
+            return;
+        }
+        let (Some(t), Some(nodes)) = (self.log_totals.last_mut(), self.log_nodes.last_mut()) else {
+            return;
+        };
+        let rel = dev + off;
+        t[i].0 += rel;
+        t[i].1 += 1;
+        nodes.add(i, load, rel);
+        self.dev_nodes.add(i, load, dev * dev);
+        self.dev_sq[i] += dev * dev;
+        self.dev_n[i] += 1;
+        self.largest_offset = self.largest_offset.max(off.abs());
+    }
+}
+
+/// Per node of [`MAP_NODES`] and residual: a weighted sum and its weight (frames).
+#[derive(Debug, Clone, Copy, Default)]
+struct NodeSums {
+    sum: [[f64; 3]; MAP_NODES.len()],
+    weight: [[f64; 3]; MAP_NODES.len()],
+}
+
+impl NodeSums {
+    /// `value` of residual `i` at `load`, shared by the two nodes around it.
+    fn add(&mut self, i: usize, load: f64, value: f64) {
+        for (j, a) in node_weights(load) {
+            self.sum[j][i] += a * value;
+            self.weight[j][i] += a;
+        }
+    }
+
+    /// The weighted mean at each node (NaN without weight) and the weights.
+    fn means(&self) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+        let mean = self
+            .sum
+            .iter()
+            .zip(&self.weight)
+            .map(|(s, w)| std::array::from_fn(|i| s[i] / w[i]))
+            .collect();
+        (mean, self.weight.to_vec())
     }
 }
 
@@ -169,8 +212,7 @@ impl ReplayObserver for Collector {
     fn begin_log(&mut self, _rt: &Runtime, _truths: &[TruthConfig]) {
         self.current = [None; 3];
         self.first_ns = None;
-        self.log_sum = [0.0; 3];
-        self.log_n = [0; 3];
+        self.start_log();
     }
 
     fn output(&mut self, t_ns: u64, monitor: &str, output: &Output<'_>) {
@@ -216,13 +258,6 @@ impl ReplayObserver for Collector {
             self.total_ns += self.last_ns.saturating_sub(a);
         }
         self.last_ns = 0;
-        self.log_means.push(std::array::from_fn(|i| {
-            if self.log_n[i] > 0 {
-                self.log_sum[i] / self.log_n[i] as f64
-            } else {
-                f64::NAN
-            }
-        }));
     }
 }
 
@@ -255,35 +290,6 @@ fn node_weights(load: f64) -> [(usize, f64); 2] {
         let a = (load - MAP_NODES[j - 1]) / (MAP_NODES[j] - MAP_NODES[j - 1]);
         [(j - 1, 1.0 - a), (j, a)]
     }
-}
-
-/// Per residual, the weighted mean of `value(sample)` at each of [`MAP_NODES`] and its
-/// weight (frames).
-fn node_means(
-    c: &Collector,
-    value: impl Fn(usize, &(f64, f64, f64, usize)) -> f64,
-) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
-    let n = MAP_NODES.len();
-    let mut sum = vec![[0.0; 3]; n];
-    let mut w = vec![[0.0; 3]; n];
-    for i in 0..3 {
-        for smp in &c.samples[i] {
-            let v = value(i, smp);
-            if !v.is_finite() {
-                continue;
-            }
-            for (j, a) in node_weights(smp.2) {
-                sum[j][i] += a * v;
-                w[j][i] += a;
-            }
-        }
-    }
-    let mean = sum
-        .iter()
-        .zip(&w)
-        .map(|(s, w)| std::array::from_fn(|i| s[i] / w[i]))
-        .collect();
-    (mean, w)
 }
 
 /// Rows at the nodes `keep` of [`MAP_NODES`]: a residual with less than `min_w` of weight at
@@ -328,16 +334,27 @@ fn fill_rows(
 fn fit_map(c: &Collector) -> Result<FittedMap, CalibrateError> {
     let mut level = [0.0; 3];
     for (i, l) in level.iter_mut().enumerate() {
-        let rel: Vec<f64> = c.samples[i].iter().map(|s| s.0 + s.1).collect();
-        if rel.is_empty() {
+        let (sum, n) = c
+            .log_totals
+            .iter()
+            .fold((0.0, 0u64), |(s, n), t| (s + t[i].0, n + t[i].1));
+        if n == 0 {
             return Err(CalibrateError::NoData(TEST_NAMES[i]));
         }
-        *l = rel.iter().sum::<f64>() / rel.len() as f64;
+        *l = sum / n as f64;
     }
-    let (mean, w) = node_means(c, |i, s| {
-        let m = c.log_means.get(s.3).map_or(f64::NAN, |m| m[i]);
-        s.0 + s.1 - m
-    });
+    // Each log's residuals about its own mean `m`: at a node, sum(w (rel - m)) = S - m W.
+    let mut centred = NodeSums::default();
+    for (t, nodes) in c.log_totals.iter().zip(&c.log_nodes) {
+        for i in (0..3).filter(|&i| t[i].1 > 0) {
+            let m = t[i].0 / t[i].1 as f64;
+            for j in 0..MAP_NODES.len() {
+                centred.sum[j][i] += nodes.sum[j][i] - m * nodes.weight[j][i];
+                centred.weight[j][i] += nodes.weight[j][i];
+            }
+        }
+    }
+    let (mean, w) = centred.means();
     let min_w = MIN_NODE_S / c.frame_dt_s;
     let keep: Vec<usize> = (0..MAP_NODES.len())
         .filter(|&j| (0..3).any(|i| w[j][i] >= min_w))
@@ -532,7 +549,7 @@ pub fn calibrate(
         }
         scales[i] = (c.dev_sq[i] / c.dev_n[i] as f64).sqrt();
     }
-    let (ms, w) = node_means(&c, |_, s| s.0 * s.0);
+    let (ms, w) = c.dev_nodes.means();
     let scale_map: Vec<[f64; 3]> = fill_rows(&keep, &ms, &w, MIN_NODE_S / frame_dt_s, frame_dt_s)?
         .into_iter()
         .map(|r| r.map(f64::sqrt))
@@ -666,14 +683,6 @@ impl TurboCalibration {
 mod tests {
     use super::*;
 
-    /// A collector holding `samples` of one log for every residual.
-    fn collector(samples: Vec<(f64, f64, f64, usize)>, log_means: Vec<[f64; 3]>) -> Collector {
-        let mut c = Collector::new(10.0, 0.05);
-        c.samples = [samples.clone(), samples.clone(), samples];
-        c.log_means = log_means;
-        c
-    }
-
     #[test]
     fn node_weights_interpolate_and_sum_to_one() {
         for load in [0.0, 0.2, 0.25, 0.55, 0.99, 1.0, 1.3, 1.7, 3.0] {
@@ -692,19 +701,17 @@ mod tests {
         // Two logs with different offsets (what the learned offsets take up) over the same
         // loads; the residual falls linearly with the load on both.
         let shape = |load: f64| 0.04 - 0.05 * load;
-        let mut samples = Vec::new();
-        let mut sums = [0.0; 2];
-        let loads: Vec<f64> = (0..4000).map(|k| 0.3 + 0.6 * (k as f64 / 3999.0)).collect();
-        for (log, off) in [(0usize, 0.02), (1, -0.01)] {
-            for &l in &loads {
-                let rel = shape(l) + off;
-                sums[log] += rel;
+        let mut c = Collector::new(10.0, 0.05);
+        for off in [0.02, -0.01] {
+            c.start_log();
+            for k in 0..4000 {
+                let l = 0.3 + 0.6 * (k as f64 / 3999.0);
                 // Deviation and learned offset as the monitor reports them: their sum is rel.
-                samples.push((rel - off, off, l, log));
+                for i in 0..3 {
+                    c.add(i, shape(l), off, l);
+                }
             }
         }
-        let means: Vec<[f64; 3]> = sums.iter().map(|s| [s / loads.len() as f64; 3]).collect();
-        let c = collector(samples, means);
         let FittedMap {
             nodes,
             keep,
