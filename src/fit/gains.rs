@@ -343,10 +343,11 @@ fn from_map(
     let repro::MapNoise {
         ambient_pressure_pa: ambient,
         noise,
-        tuning_speed_rad_s: speed,
+        tuning_setting,
         turbo_speed_error_rad_s: q_speed,
         ..
     } = repro::map_noise(model, params, dir)?;
+    let speed = tuning_setting.engine_speed_rad_s;
     let conditions = Conditions {
         ambient_pressure_pa: ambient,
         ambient_temperature_k: repro::AMBIENT_TEMPERATURE_K,

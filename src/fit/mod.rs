@@ -146,6 +146,14 @@ pub enum FitIoError {
         /// Needed.
         need: usize,
     },
+    /// The log that anchors the shaft's loss torque cannot be used.
+    #[error("{}: {message}", file.display())]
+    Anchor {
+        /// The log.
+        file: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
     /// A fit or the check failed.
     #[error(transparent)]
     Fit(#[from] FitError),
@@ -278,6 +286,7 @@ pub fn read_data(dir: &Path) -> Result<FitData, FitIoError> {
         engine,
         compressor_map,
         turbine_map,
+        shaft_anchor: None,
     })
 }
 
@@ -334,6 +343,7 @@ pub fn run(args: &FitTurboArgs) -> Result<FitRun, FitIoError> {
         args.data.join(ENGINE_MAP_FILE),
         args.data.join(COMPRESSOR_MAP_FILE),
         args.data.join(TURBINE_MAP_FILE),
+        args.data.join(crate::reproduce::turbo::TUNING_LOG),
     ];
     if let Ok(out) = args.out.canonicalize() {
         if inputs
@@ -345,7 +355,15 @@ pub fn run(args: &FitTurboArgs) -> Result<FitRun, FitIoError> {
             });
         }
     }
-    let data = read_data(&args.data)?;
+    let mut data = read_data(&args.data)?;
+    data.shaft_anchor = Some(
+        crate::reproduce::turbo::shaft_anchor(&args.data, &data.engine).map_err(|e| {
+            FitIoError::Anchor {
+                file: args.data.join(crate::reproduce::turbo::TUNING_LOG),
+                message: e.to_string(),
+            }
+        })?,
+    );
     let start = load_params(&args.start)?;
     let options = FitOptions::tsfs09();
     let outcome = fit_turbo(&start, &data, &options)?;

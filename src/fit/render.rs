@@ -167,6 +167,10 @@ pub(crate) fn entries(p: &TurboParams) -> Vec<(&'static str, Value)> {
             "turbo_friction_n_m_s_per_rad",
             Num(p.turbo_friction_n_m_s_per_rad),
         ),
+        (
+            "turbo_friction_torque_n_m",
+            Num(p.turbo_friction_torque_n_m),
+        ),
         ("turbo_speed_min_rad_s", Num(p.turbo_speed_min_rad_s)),
         ("turbo_speed_max_rad_s", Num(p.turbo_speed_max_rad_s)),
     ]
@@ -381,8 +385,29 @@ fn note(key: &str, o: &FitOutcome, opts: &FitOptions) -> Vec<String> {
             "(the engine's working points span BSR {:.3} to {:.3} with the model's turbo speed)",
             r.turbine.bsr_range.0, r.turbine.bsr_range.1
         )],
-        "turbo_inertia_kg_m2" => kept("the shaft's inertia, friction and limits are not determined by stationary data."),
+        "turbo_inertia_kg_m2" => kept("the shaft's inertia, viscous friction and speed limits are not determined by stationary data."),
         "turbo_friction_n_m_s_per_rad" | "turbo_speed_min_rad_s" | "turbo_speed_max_rad_s" => vec![],
+        "turbo_friction_torque_n_m" => match &r.shaft {
+            Some(f) => vec![
+                format!(
+                    "Fitted to a measured turbo speed (the map has none): the model's stationary speed at the start of {}",
+                    crate::reproduce::turbo::TUNING_LOG
+                ),
+                format!(
+                    "(throttle {:.2} %, engine speed {:.0} rpm read off the map, the wastegate the map needs there {:.3}, lambda {})",
+                    f.anchor.throttle_pct,
+                    f.anchor.engine_speed_rad_s * 60.0 / std::f64::consts::TAU,
+                    f.wastegate_frac,
+                    f.anchor.lambda
+                ),
+                format!(
+                    "equals the measured {:.0} rad/s ({:.0} rad/s without it); the turbine flow above is refitted with it. A loss",
+                    f.anchor.turbo_speed_rad_s, f.start_speed_rad_s
+                ),
+                "independent of the speed, not more viscous friction: that one costs kilowatts at full load (fit::shaft).".into(),
+            ],
+            None => kept("no log with a measured turbo speed: not determined by stationary data."),
+        },
         _ => kept("not fitted."),
     }
 }

@@ -14,9 +14,15 @@
 //! - **Inputs** the logs do not have: the engine speed (constant in every log, not logged) is
 //!   read off the engine map (model-free: at the log's initial `p_im`, each map speed line's air
 //!   flow interpolated linearly in `p_im`, then the speed whose flow matches the log's initial
-//!   air flow, [`speed_from_map`]); the wastegate of the airstep log (not logged) is taken
-//!   closed, as the paper did (the throttled engine at 20-30 % needs no boost control);
-//!   lambda 1 where not logged; ambient pressure the map's fitted one, ambient temperature
+//!   air flow, [`speed_from_map`]); the wastegate of the airstep log (not logged) is the
+//!   opening the model needs at the map's points around the log's initial operating point
+//!   ([`LogSetting::wastegate_frac`]: the whole-model check solves it per point to match the
+//!   measured boost), the rule `fdd fit turbo` uses when it fits the shaft's loss torque to the
+//!   log's start. Without that loss the model made the map's 109-113 kPa of boost at
+//!   1,050-1,300 rpm and 86 kPa with its wastegate a quarter open, and with it closed (the
+//!   paper's choice) its stationary point at the log's start had 125 kPa of boost, a manifold
+//!   pressure 10 kPa above the sensor's and a turbo speed 1.7 times the measured one; with the
+//!   fitted loss the map's opening there is about closed (0.001); lambda 1 where not logged; ambient pressure the map's fitted one, ambient temperature
 //!   298 K (the compressor map's reference; the logs have no ambient temperature).
 //! - **Sensors**: `p_im` and the air flow (the transients log no boost pressure); the turbo
 //!   speed is measured but kept out of the observer, to judge its estimate.
@@ -41,7 +47,8 @@ use std::path::{Path, PathBuf};
 
 use fdd_estimators::models::turbo::fit::check::check_engine_map;
 use fdd_estimators::models::turbo::fit::components::fit_air_filter;
-use fdd_estimators::models::turbo::fit::{EnginePoint, FitError, FitOptions};
+use fdd_estimators::models::turbo::fit::map_lookup::speed_from_map;
+use fdd_estimators::models::turbo::fit::{EnginePoint, FitError, FitOptions, ShaftAnchor};
 use fdd_estimators::models::turbo::observer::design::{
     design_gains, state_noise_from_map, Conditions, DesignError, DesignOptions, NoiseSample,
 };
@@ -246,38 +253,6 @@ pub fn stationary_segments(tr: &Transient) -> Vec<(usize, usize)> {
     out
 }
 
-/// Engine speed (rad/s) of a log, read off the engine map at its initial operating point (see
-/// the module docs). `None` when the point lies outside the map's speed lines.
-pub fn speed_from_map(map: &[EnginePoint], p_im_pa: f64, flow_kg_s: f64) -> Option<f64> {
-    let mut lines: BTreeMap<i64, Vec<&EnginePoint>> = BTreeMap::new();
-    for p in map {
-        let rpm = (p.engine_speed_rev_s * 60.0 / 50.0).round() as i64 * 50;
-        lines.entry(rpm).or_default().push(p);
-    }
-    // Per line: the flow at p_im_pa by linear interpolation between the bracketing points.
-    let mut curve: Vec<(f64, f64)> = Vec::new();
-    for pts in lines.values_mut() {
-        pts.sort_by(|a, b| a.p_im_pa.total_cmp(&b.p_im_pa));
-        let speed = pts.iter().map(|p| p.engine_speed_rev_s).sum::<f64>() / pts.len() as f64
-            * std::f64::consts::TAU;
-        if let Some(w) = pts
-            .windows(2)
-            .find(|w| w[0].p_im_pa <= p_im_pa && p_im_pa <= w[1].p_im_pa)
-        {
-            let f = (p_im_pa - w[0].p_im_pa) / (w[1].p_im_pa - w[0].p_im_pa).max(1.0);
-            curve.push((
-                speed,
-                w[0].air_flow_kg_s + f * (w[1].air_flow_kg_s - w[0].air_flow_kg_s),
-            ));
-        }
-    }
-    curve.windows(2).find_map(|w| {
-        let ((s0, f0), (s1, f1)) = (w[0], w[1]);
-        ((f0 - flow_kg_s) * (f1 - flow_kg_s) <= 0.0 && f1 != f0)
-            .then(|| s0 + (flow_kg_s - f0) / (f1 - f0) * (s1 - s0))
-    })
-}
-
 fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
@@ -357,24 +332,44 @@ fn step_lag(sensor: &[f64], est: &[f64], windows: &[(usize, usize)]) -> Option<f
     lag_samples(&s, &e)
 }
 
-/// The inputs the model gets at sample `i` of a transient: the logged throttle, wastegate
-/// (closed where not logged) and lambda (1 where not logged, or not finite), the given engine
-/// speed and ambient pressure, and [`AMBIENT_TEMPERATURE_K`].
-pub fn transient_input(tr: &Transient, i: usize, speed: f64, ambient_pa: f64) -> TurboInput {
-    let wg = tr.wastegate.as_ref().map_or(0.0, |w| w[i].clamp(0.0, 1.0));
-    let lambda = tr.lambda.as_ref().map_or(1.0, |l| {
+/// Lambda at sample `i`: logged, or 1 where not logged or not finite.
+fn transient_lambda(tr: &Transient, i: usize) -> f64 {
+    tr.lambda.as_ref().map_or(1.0, |l| {
         if l[i].is_finite() {
             l[i].clamp(0.5, 3.0)
         } else {
             1.0
         }
-    });
+    })
+}
+
+/// What a transient's inputs lack, decided once per log (module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LogSetting {
+    /// Engine speed (rad/s), read off the map ([`speed_from_map`]).
+    pub engine_speed_rad_s: f64,
+    /// Ambient pressure (Pa): the map's air-filter fit.
+    pub ambient_pa: f64,
+    /// Wastegate opening where the log has none: the map's at the log's initial point
+    /// ([`fdd_estimators::models::turbo::fit::map_lookup::wastegate_from_map`]).
+    pub wastegate_frac: f64,
+}
+
+/// The inputs the model gets at sample `i` of a transient: the logged throttle, wastegate
+/// (the setting's where not logged) and lambda (1 where not logged, or not finite), the
+/// setting's engine speed and ambient pressure, and [`AMBIENT_TEMPERATURE_K`].
+pub fn transient_input(tr: &Transient, i: usize, set: &LogSetting) -> TurboInput {
+    let wg = tr
+        .wastegate
+        .as_ref()
+        .map_or(set.wastegate_frac, |w| w[i].clamp(0.0, 1.0));
+    let lambda = transient_lambda(tr, i);
     TurboInput {
         throttle_pct: tr.throttle_pct[i].clamp(0.0, 100.0),
-        engine_speed_rad_s: speed,
+        engine_speed_rad_s: set.engine_speed_rad_s,
         wastegate_frac: wg,
         lambda,
-        ambient_pressure_pa: ambient_pa,
+        ambient_pressure_pa: set.ambient_pa,
         ambient_temperature_k: AMBIENT_TEMPERATURE_K,
     }
 }
@@ -398,8 +393,7 @@ fn run_observer(
     mode: Interpolation,
     augmented: bool,
     tr: &Transient,
-    speed: f64,
-    ambient_pa: f64,
+    set: &LogSetting,
 ) -> Result<Run, TurboReproError> {
     let mut obs = TurboObserver::new(
         model.clone(),
@@ -409,10 +403,10 @@ fn run_observer(
         mode,
         augmented,
     )?;
-    obs.reset_stationary(&transient_input(tr, 0, speed, ambient_pa))?;
+    obs.reset_stationary(&transient_input(tr, 0, set))?;
     let mut run = Run::default();
     for i in 0..tr.t.len() {
-        let u = transient_input(tr, i, speed, ambient_pa);
+        let u = transient_input(tr, i, set);
         let y = SVector::<f64, 2>::new(tr.p_im_pa[i], tr.maf_kg_s[i]);
         let s = obs.update(&u, &y)?;
         run.p_im_pa.push(s.signals.p_im_pa);
@@ -428,6 +422,8 @@ fn run_observer(
 pub struct LogFigures {
     /// Engine speed used (rpm).
     pub engine_speed_rpm: f64,
+    /// The map's wastegate opening used where the log has none.
+    pub wastegate_frac: Option<f64>,
     /// Turbo speed estimate RMS error, % of the measured mean.
     pub turbo_speed_rms_pct: f64,
     /// Same for the model alone (no feedback).
@@ -535,8 +531,10 @@ pub struct MapNoise {
     pub tuning: Transient,
     /// Its stationary start (sample indices).
     pub stationary_start: (usize, usize),
-    /// Its engine speed read off the map (rad/s).
-    pub tuning_speed_rad_s: f64,
+    /// The map's points the fit was trained on (every 5th held out).
+    pub training: Vec<EnginePoint>,
+    /// Its setting (engine speed read off the map, the map's wastegate).
+    pub tuning_setting: LogSetting,
     /// The turbo speed's state-noise entry (rad/s).
     pub turbo_speed_error_rad_s: f64,
 }
@@ -544,13 +542,103 @@ pub struct MapNoise {
 /// The engine speed of a transient read off the map ([`speed_from_map`]), or an error naming
 /// the log and its initial point.
 fn transient_speed(engine: &[EnginePoint], tr: &Transient) -> Result<f64, TurboReproError> {
-    speed_from_map(engine, tr.p_im_pa[0], tr.maf_kg_s[0]).ok_or_else(|| TurboReproError::Log2 {
+    speed_from_map(engine, tr.p_im_pa[0], tr.maf_kg_s[0]).ok_or_else(|| outside_map(tr))
+}
+
+fn outside_map(tr: &Transient) -> TurboReproError {
+    TurboReproError::Log2 {
         file: tr.file.clone(),
         what: format!(
             "initial p_im {:.0} Pa and air flow {:.4} kg/s lie outside the engine map's speed lines",
             tr.p_im_pa[0], tr.maf_kg_s[0]
         ),
+    }
+}
+
+/// A transient's setting: its engine speed read off the `engine` map, the ambient pressure,
+/// and, if it logs no wastegate, the opening the model needs at the `training` map points
+/// around its initial operating point (their whole-model check with `params`,
+/// [`ShaftAnchor::wastegate`]: what `fdd fit turbo` takes at the same point).
+fn transient_setting(
+    params: &TurboParams,
+    engine: &[EnginePoint],
+    training: &[EnginePoint],
+    tr: &Transient,
+    ambient_pa: f64,
+) -> Result<LogSetting, TurboReproError> {
+    let anchor = anchor_of(engine, tr, (0, 1))?;
+    let wastegate_frac = anchor.wastegate(params, training, ambient_pa, &FitOptions::tsfs09())?;
+    Ok(LogSetting {
+        engine_speed_rad_s: anchor.engine_speed_rad_s,
+        ambient_pa,
+        wastegate_frac,
     })
+}
+
+/// The anchor of a log's stretch `[a, b)`: the inputs of its first sample and the measured
+/// turbo speed's mean over the stretch.
+fn anchor_of(
+    engine: &[EnginePoint],
+    tr: &Transient,
+    (a, b): (usize, usize),
+) -> Result<ShaftAnchor, TurboReproError> {
+    let speed = transient_speed(engine, tr)?;
+    Ok(ShaftAnchor {
+        throttle_pct: tr.throttle_pct[a].clamp(0.0, 100.0),
+        engine_speed_rad_s: speed,
+        p_im_pa: tr.p_im_pa[a],
+        wastegate_frac: tr.wastegate.as_ref().map(|w| w[a].clamp(0.0, 1.0)),
+        lambda: transient_lambda(tr, a),
+        ambient_temperature_k: AMBIENT_TEMPERATURE_K,
+        turbo_speed_rad_s: mean(&tr.turbo_speed_rad_s[a..b]),
+    })
+}
+
+/// The tuning log's stationary start (before its first input step) as the shaft fit's anchor
+/// ([`fdd_estimators::models::turbo::fit::shaft`]): the inputs of its first sample, as the
+/// observer here starts from them ([`transient_input`]: lambda 1, engine speed read off the
+/// `engine` map, no wastegate logged so the map's), and the measured turbo speed's mean over
+/// the stretch. The fit reads the map's wastegate from its training points, as
+/// the reproduction does for a log without a wastegate.
+pub fn shaft_anchor(dir: &Path, engine: &[EnginePoint]) -> Result<ShaftAnchor, TurboReproError> {
+    let tuning = read_transient(&dir.join(TUNING_LOG))?;
+    let start = stationary_start(&tuning)?;
+    anchor_of(engine, &tuning, start)
+}
+
+/// The stationary start of a log: its first stationary segment if it begins at sample 0.
+fn stationary_start(tr: &Transient) -> Result<(usize, usize), TurboReproError> {
+    stationary_segments(tr)
+        .first()
+        .filter(|(a, _)| *a == 0)
+        .copied()
+        .ok_or_else(|| TurboReproError::Log2 {
+            file: tr.file.clone(),
+            what: "no stationary start before the first input step".into(),
+        })
+}
+
+/// The turbo speed's state noise (rad/s): the RMS over the tuning log's stationary segments
+/// of the model's stationary turbo speed at each segment's inputs minus the measured mean
+/// there. (The shaft's loss torque is fitted to the first segment, so one segment alone would say
+/// the model is exact.)
+fn turbo_speed_noise(
+    model: &TurboModel,
+    tr: &Transient,
+    set: &LogSetting,
+) -> Result<f64, TurboReproError> {
+    let mut errors = Vec::new();
+    for (a, b) in stationary_segments(tr) {
+        let st = model.stationary_point(&transient_input(tr, a, set), None)?;
+        errors.push(st.state[X_OMEGA_T] - mean(&tr.turbo_speed_rad_s[a..b]));
+    }
+    if errors.is_empty() {
+        return Err(TurboReproError::Log2 {
+            file: tr.file.clone(),
+            what: "no stationary segment".into(),
+        });
+    }
+    Ok((errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt())
 }
 
 /// See [`MapNoise`]; `dir` is the TSFS09 data directory.
@@ -571,18 +659,9 @@ pub fn map_noise(
     let ambient = fit_air_filter(&training, params)?.ambient_pressure_pa.value;
     let check = check_engine_map(params, &data.engine, ambient, &opts)?;
     let tuning = read_transient(&dir.join(TUNING_LOG))?;
-    let Some(&(a0, b0)) = stationary_segments(&tuning)
-        .first()
-        .filter(|(a, _)| *a == 0)
-    else {
-        return Err(TurboReproError::Log2 {
-            file: tuning.file.clone(),
-            what: "no stationary start before the first input step".into(),
-        });
-    };
-    let speed = transient_speed(&data.engine, &tuning)?;
-    let st = model.stationary_point(&transient_input(&tuning, 0, speed, ambient), None)?;
-    let q_speed = (st.state[X_OMEGA_T] - mean(&tuning.turbo_speed_rad_s[a0..b0])).abs();
+    let (a0, b0) = stationary_start(&tuning)?;
+    let setting = transient_setting(params, &data.engine, &training, &tuning, ambient)?;
+    let q_speed = turbo_speed_noise(model, &tuning, &setting)?;
     let noise = state_noise_from_map(model, &data.engine, &check, q_speed);
     Ok(MapNoise {
         engine: data.engine,
@@ -590,7 +669,8 @@ pub fn map_noise(
         noise,
         tuning,
         stationary_start: (a0, b0),
-        tuning_speed_rad_s: speed,
+        training,
+        tuning_setting: setting,
         turbo_speed_error_rad_s: q_speed,
     })
 }
@@ -605,7 +685,8 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
         noise,
         tuning,
         stationary_start: (a0, b0),
-        tuning_speed_rad_s: speed_tuning,
+        training,
+        tuning_setting,
         turbo_speed_error_rad_s: q_speed,
     } = map_noise(&model, &params, &s.data)?;
     let held = read_transient(&s.data.join(HELD_OUT_LOG))?;
@@ -616,7 +697,7 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
         let sd = detrended_std(&tuning.t[a0..b0], seg);
         sd.max(R_FLOOR_REL * m.abs())
     });
-    let speed_held = transient_speed(&engine, &held)?;
+    let held_setting = transient_setting(&params, &engine, &training, &held, ambient)?;
     let design_opts = DesignOptions {
         dt_s: DT_S,
         sensors: [Sensor::PIm, Sensor::Maf],
@@ -643,7 +724,7 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
     ve_params.vol_eff_factor *= VE_ERROR;
     let ve_model = TurboModel::new(ve_params)?;
     // The same gains for the perturbed model: the design is a property of the nominal model.
-    let figures = |tr: &Transient, speed: f64| -> Result<LogFigures, TurboReproError> {
+    let figures = |tr: &Transient, set: &LogSetting| -> Result<LogFigures, TurboReproError> {
         let segs = stationary_segments(tr);
         let windows = throttle_step_windows(tr);
         let bil = run_observer(
@@ -652,27 +733,17 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
             Interpolation::Bilinear,
             true,
             tr,
-            speed,
-            ambient,
+            set,
         )?;
-        let near = run_observer(
-            &model,
-            &design.table,
-            Interpolation::Nearest,
-            true,
-            tr,
-            speed,
-            ambient,
-        )?;
-        let open = open_loop(&model, tr, speed, ambient)?;
+        let near = run_observer(&model, &design.table, Interpolation::Nearest, true, tr, set)?;
+        let open = open_loop(&model, tr, set)?;
         let plain = run_observer(
             &ve_model,
             &design.table,
             Interpolation::Bilinear,
             false,
             tr,
-            speed,
-            ambient,
+            set,
         )?;
         let aug = run_observer(
             &ve_model,
@@ -680,8 +751,7 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
             Interpolation::Bilinear,
             true,
             tr,
-            speed,
-            ambient,
+            set,
         )?;
         let sensor_noise = pooled_noise(&tr.t, &tr.p_im_pa, &segs);
         let est_noise = pooled_noise(&tr.t, &bil.p_im_pa, &segs);
@@ -692,8 +762,7 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
             Interpolation::Bilinear,
             false,
             tr,
-            speed,
-            ambient,
+            set,
         )?;
         let e_plain = stationary_mean_error(&plain.p_im_pa, &nom_plain.p_im_pa, &segs);
         let e_aug = stationary_mean_error(&aug.p_im_pa, &bil.p_im_pa, &segs);
@@ -701,7 +770,8 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
             write_series(dir, tr, &bil, &open, &plain, &aug)?;
         }
         Ok(LogFigures {
-            engine_speed_rpm: speed * 60.0 / std::f64::consts::TAU,
+            engine_speed_rpm: set.engine_speed_rad_s * 60.0 / std::f64::consts::TAU,
+            wastegate_frac: tr.wastegate.is_none().then_some(set.wastegate_frac),
             turbo_speed_rms_pct: rms_pct(&bil.turbo_speed_rad_s, &tr.turbo_speed_rad_s),
             turbo_speed_rms_pct_open_loop: rms_pct(&open, &tr.turbo_speed_rad_s),
             p_im_sensor_noise_pa: sensor_noise,
@@ -722,8 +792,8 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
         r_std,
         turbo_speed_q_rad_s: q_speed,
         worst_closed_loop_radius: worst,
-        tuning: figures(&tuning, speed_tuning)?,
-        held_out: figures(&held, speed_held)?,
+        tuning: figures(&tuning, &tuning_setting)?,
+        held_out: figures(&held, &held_setting)?,
     })
 }
 
@@ -774,19 +844,18 @@ fn write_series(
 fn open_loop(
     model: &TurboModel,
     tr: &Transient,
-    speed: f64,
-    ambient: f64,
+    set: &LogSetting,
 ) -> Result<Vec<f64>, TurboReproError> {
     let step =
         fdd_estimators::models::turbo::discrete::TurboDiscrete::new(model.clone(), DT_S, DT_S)?
             .with_newton_tolerance(fdd_estimators::models::turbo::observer::OBSERVER_NEWTON_TOL)?;
     let mut x = model
-        .stationary_point(&transient_input(tr, 0, speed, ambient), None)?
+        .stationary_point(&transient_input(tr, 0, set), None)?
         .state;
     let mut out = Vec::with_capacity(tr.t.len());
     for i in 0..tr.t.len() {
         if i > 0 {
-            x = step.step(&x, &transient_input(tr, i - 1, speed, ambient))?;
+            x = step.step(&x, &transient_input(tr, i - 1, set))?;
         }
         out.push(x[X_OMEGA_T]);
     }
@@ -808,8 +877,9 @@ pub fn render(r: &TurboReport) -> String {
     );
     let _ = writeln!(s, "{:<44} {:>14} {:>14}", "figure", "tuning", "held-out");
     type Row = (&'static str, fn(&LogFigures) -> Option<f64>);
-    let rows: [Row; 14] = [
+    let rows: [Row; 15] = [
         ("engine speed used (rpm)", |f| Some(f.engine_speed_rpm)),
+        ("wastegate from the map (-)", |f| f.wastegate_frac),
         ("turbo speed RMS error (%)", |f| Some(f.turbo_speed_rms_pct)),
         ("  model alone (%)", |f| {
             Some(f.turbo_speed_rms_pct_open_loop)

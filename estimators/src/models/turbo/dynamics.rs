@@ -199,6 +199,7 @@ impl Consts {
             shaft: Shaft {
                 inv_inertia: 1.0 / p.turbo_inertia_kg_m2,
                 friction: p.turbo_friction_n_m_s_per_rad,
+                friction_torque: p.turbo_friction_torque_n_m,
                 omega_min: p.turbo_speed_min_rad_s,
                 omega_max: p.turbo_speed_max_rad_s,
             },

@@ -171,6 +171,15 @@ pub struct TurboParams {
     pub turbo_inertia_kg_m2: f64,
     /// Turbo shaft viscous friction `d`: torque `d omega_t` (N m s/rad).
     pub turbo_friction_n_m_s_per_rad: f64,
+    /// Turbo shaft loss torque independent of the speed `tau_0` (N m): bearing and seal
+    /// friction that does not scale with the speed, and whatever else the turbine loses at
+    /// part load that the gas-stand efficiency map does not show (heat). It decides where the
+    /// shaft settles at part load, where the turbine delivers a few hundred watts, and costs
+    /// little at full load (`tau_0 omega_t` against the compressor's kilowatts). Optional,
+    /// default 0 (the generic and VEP4 sets have only the viscous term); `fdd fit turbo` fits
+    /// it to a measured turbo speed.
+    #[serde(default)]
+    pub turbo_friction_torque_n_m: f64,
     /// Lowest turbo speed (rad/s): the state is held at or above it.
     pub turbo_speed_min_rad_s: f64,
     /// Highest turbo speed (rad/s).
@@ -268,6 +277,9 @@ pub mod ranges {
     pub const INERTIA: Range = Range::above(0.0, 1e-2, "kg m^2");
     /// Shaft friction.
     pub const FRICTION: Range = Range::closed(0.0, 1e-3, "N m s/rad");
+    /// Speed-independent shaft loss torque: up to 1 N m (tens of kW at full speed, far beyond
+    /// any bearing).
+    pub const FRICTION_TORQUE: Range = Range::closed(0.0, 1.0, "N m");
     /// Turbo speed limits: the minimum must be positive (torques divide by the speed).
     pub const TURBO_SPEED: Range = Range::closed(100.0, 5e4, "rad/s");
 }
@@ -529,6 +541,11 @@ impl TurboParams {
                 "turbo_friction_n_m_s_per_rad",
                 self.turbo_friction_n_m_s_per_rad,
                 r::FRICTION,
+            ),
+            (
+                "turbo_friction_torque_n_m",
+                self.turbo_friction_torque_n_m,
+                r::FRICTION_TORQUE,
             ),
         ];
         for (key, v, range) in checks {

@@ -217,6 +217,9 @@ pub struct FitReport {
     pub turbine: TurbineFit,
     /// Turbine map (its efficiency used, its flow reported).
     pub turbine_map: TurbineMapFit,
+    /// Shaft loss torque from a measured turbo speed (with it, `turbine` is the refit), if the
+    /// data had an anchor.
+    pub shaft: Option<super::ShaftFit>,
     /// Engine-map points used for the component fits (not held out).
     pub training_points: usize,
     /// Points held out.
@@ -853,7 +856,7 @@ pub fn fit_intercooler(
 /// map has no wastegate position, so the exhaust flow does not say how much of it passed the
 /// turbine. The power balance does: at each point the turbine delivers the compressor's power
 /// (the compressor model's power at the turbo speed it needs, [`CompressorState`], plus the
-/// shaft friction), so with the turbine's efficiency known the flow through the turbine is
+/// shaft's friction losses), so with the turbine's efficiency known the flow through the turbine is
 /// `W_t = P / (cp_e T_em eta_t(BSR) (1 - Pi_t^((k_e-1)/k_e)))` at the measured `p_em, T_em, p_t`,
 /// whatever the wastegate passed. The efficiency is the turbine map's ([`fit_turbine_map`]:
 /// the parabola in the blade speed ratio, `eta_max` and `BSR_opt`, dimensionless and measured
@@ -889,7 +892,7 @@ pub fn fit_turbine(points: &[EnginePoint], params: &TurboParams) -> Result<Turbi
             if !(st.omega_rad_s > omega_floor) || !(p.p_em_pa > p.p_t_pa) {
                 return None;
             }
-            let power = st.power_w + c.shaft.friction * st.omega_rad_s * st.omega_rad_s;
+            let power = st.power_w + c.shaft.friction_power(st.omega_rad_s);
             // Work per kg through the turbine at the measured state (J/kg): the turbine's own
             // code, whose torque is its flow times that work over the speed.
             let pt = t0.point(p.p_em_pa, p.t_em_k, p.p_t_pa, p.t_t_k, st.omega_rad_s);
@@ -1121,9 +1124,19 @@ pub fn fit_turbo(
     p.turbine_efficiency_max = turbine_map.efficiency_max;
     p.turbine_bsr_at_efficiency_max = turbine_map.bsr_at_efficiency_max;
 
-    let turbine = fit_turbine(&training, &p)?;
+    let mut turbine = fit_turbine(&training, &p)?;
     p.turbine_flow_k1_kg_k05_per_s_kpa = turbine.k1.value;
     p.turbine_linear_ratio = turbine.linear_ratio;
+
+    let shaft = match &data.shaft_anchor {
+        Some(anchor) => {
+            let (q, fit) = super::shaft::fit_shaft_torque(&training, &p, anchor, p_amb, opts)?;
+            p = q;
+            turbine = fit.turbine;
+            Some(fit)
+        }
+        None => None,
+    };
 
     p.validate()?;
     Ok(FitOutcome {
@@ -1138,6 +1151,7 @@ pub fn fit_turbo(
             intercooler,
             turbine,
             turbine_map,
+            shaft,
             training_points: training.len(),
             held_out_points,
         },

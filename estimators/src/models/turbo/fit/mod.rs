@@ -20,6 +20,8 @@ pub mod check;
 pub mod components;
 pub mod ice;
 pub mod least_squares;
+pub mod map_lookup;
+pub mod shaft;
 
 use thiserror::Error;
 
@@ -28,6 +30,7 @@ use crate::param::ParamError;
 
 pub use check::{check_engine_map, CheckReport, PointCheck, QuantityStats, WastegateSolve};
 pub use components::{fit_turbo, FitOutcome, FitReport};
+pub use shaft::{ShaftAnchor, ShaftFit};
 
 /// One stationary engine-map point, SI units (Pa, K, kg/s), as measured.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -97,6 +100,9 @@ pub struct FitData {
     pub compressor_map: Vec<CompressorMapPoint>,
     /// The turbine map.
     pub turbine_map: Vec<TurbineMapPoint>,
+    /// A stationary stretch of a log with a measured turbo speed, which fits the shaft's loss
+    /// torque ([`shaft`]); without one the torque stays the start file's.
+    pub shaft_anchor: Option<ShaftAnchor>,
 }
 
 /// The engine's constants and the maps' reference conditions, given with the data rather than
