@@ -133,3 +133,70 @@ fn turbo_calibration_writes_maps_that_calibrate_to_themselves_and_refuses_a_faul
     assert!(!out.status.success());
     assert!(err.contains("f.mcap") && err.contains("waf_gain"), "{err}");
 }
+
+/// The LiU-ICE monitor file: `fdd calibrate` on the two fault-free calibration logs writes the
+/// committed `config/turbo_monitor.toml` byte for byte (so its thresholds, scales and map are
+/// the command's, from fault-free data only), and the third fault-free log, which it was not
+/// calibrated on, raises no DTC.
+#[test]
+fn liu_ice_monitor_file_is_what_calibrate_writes_from_the_fault_free_logs() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    // config/fdd.toml with the air-path monitor on and the committed monitor file (and its
+    // parameter file) beside it.
+    let base = std::fs::read_to_string(root().join("config/fdd.toml")).expect("fdd.toml");
+    assert!(
+        base.contains("\nturbo = false\n"),
+        "config/fdd.toml changed"
+    );
+    let cfg = dir.path().join("fdd.toml");
+    std::fs::write(
+        &cfg,
+        base.replace(
+            "\nturbo = false\n",
+            "\nturbo = true\nturbo_config = \"turbo_monitor.toml\"\n",
+        ),
+    )
+    .expect("write config");
+    for f in ["turbo_monitor.toml", "turbo_liu_ice.toml"] {
+        std::fs::copy(root().join("config").join(f), dir.path().join(f)).expect("copy");
+    }
+    let liu = root().join("fixtures/data/real/liu-ice");
+    let a = liu.join("ftp75city2_NF_0-100s.mcap");
+    let b = liu.join("ftp75city2_NF_140-260s.mcap");
+    let out = dir.path().join("out");
+    let mut args: Vec<&std::ffi::OsStr> = vec![
+        "calibrate".as_ref(),
+        "--monitor".as_ref(),
+        "turbo".as_ref(),
+        "--block-s".as_ref(),
+        "0.25".as_ref(),
+    ];
+    args.extend([a.as_os_str(), b.as_os_str()]);
+    args.extend([
+        "--config".as_ref(),
+        cfg.as_os_str(),
+        "-o".as_ref(),
+        out.as_os_str(),
+    ]);
+    ok(&args);
+    let written = std::fs::read_to_string(out.join("turbo.toml")).expect("written");
+    let committed =
+        std::fs::read_to_string(root().join("config/turbo_monitor.toml")).expect("committed");
+    assert!(
+        written == committed,
+        "config/turbo_monitor.toml differs from what fdd calibrate writes:\n{written}"
+    );
+    let judged = liu.join("ftp75city2_NF_window.mcap");
+    let report = ok(&[
+        "replay".as_ref(),
+        "--no-progress".as_ref(),
+        "--config".as_ref(),
+        out.join("fdd.toml").as_os_str(),
+        judged.as_os_str(),
+    ]);
+    assert!(report.contains("turbo ("), "{report}");
+    assert!(
+        !report.contains("P0"),
+        "a DTC on fault-free driving:\n{report}"
+    );
+}
