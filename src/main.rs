@@ -181,14 +181,16 @@ enum Command {
 
 #[derive(Subcommand)]
 enum Fit {
-    /// Fit the turbocharged air-path model to the TSFS09 engine, compressor and turbine maps,
-    /// check the whole model's stationary point at every map point, and write a complete
-    /// parameter file (commented with what was fitted from what and the error figures).
+    /// Fit the turbocharged air-path model to the TSFS09 engine, compressor and turbine maps
+    /// (and the shaft's loss torque to the measured turbo speed of a throttle-step log), check
+    /// the whole model's stationary point at every map point, and write a complete parameter
+    /// file (commented with what was fitted from what and the error figures).
     ///
     /// Prints the per-quantity error table (all points and the held-out every 5th point). The
     /// same inputs give the same bytes.
     Turbo {
-        /// The data directory: engine_map.csv, comp_map.csv, turb_map.csv.
+        /// The data directory: engine_map.csv, comp_map.csv, turb_map.csv, and the throttle-step log
+        /// grupp1_airstep.mcap (its measured turbo speed fits the shaft's loss torque).
         #[arg(long)]
         data: PathBuf,
         /// The start parameter file (its [model] table; e.g. config/turbo.toml).

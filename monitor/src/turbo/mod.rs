@@ -40,8 +40,8 @@
 //! (on the LiU-ICE logs up to 6 % between runs) is learned on top, like an ECU's adaptation
 //! values: each residual's offset learns with time constant `adapt_tau_s` for its first
 //! `adapt_min_s` of tested time in an operation cycle (its test waits), then ten times slower
-//! and only while every deviation is below `max(LEARN_BAND scales, min_shift / 2)` and no
-//! alarm is pending. An offset is bounded by `adapt_limit`.
+//! and only while every deviation tested in that frame is below `max(LEARN_BAND scales,
+//! min_shift / 2)` and no alarm is pending. An offset is bounded by `adapt_limit`.
 //!
 //! # Tests and decisions
 //!
@@ -495,10 +495,14 @@ impl TurboMonitor {
         let settled: [bool; 3] = std::array::from_fn(|i| self.enabled_s[i] >= tau);
         let learning: [bool; 3] = std::array::from_fn(|i| self.learned_s[i] < self.cfg.adapt_min_s);
         let learning_phase = learning[R_CYL];
+        // Quiet: no episode open and every residual tested this frame near its offset (one
+        // that is not tested now, e.g. a throttle residual while the pressures settle, has no
+        // say: its deviation there is the transient's, not a fault's).
         let quiet = self.episode_start_s.is_none()
             && (0..3).all(|i| {
                 !settled[i]
                     || learning[i]
+                    || !steady_r[i]
                     || z[i].abs() * scale[i] < (LEARN_BAND * scale[i]).max(0.5 * self.cfg.min_shift)
             });
         {
