@@ -5,7 +5,10 @@
 //!
 //! `cargo bench --bench turbo_monitor`. Each iteration is one `process_frame` call on the
 //! second half of a 120 s drive, after the first half warmed the monitor up (offsets learned,
-//! tests running).
+//! tests running). `turbo_monitor_fault_frame` times single frames (one per sample) of a
+//! faulty city drive from its onset on: the CUSUMs rise, the hypothesis bank takes every
+//! tested frame, decides 2 s after the first alarm and the events report; its slowest samples
+//! are the decisions (and the machine's interruptions).
 
 use std::path::PathBuf;
 
@@ -24,8 +27,11 @@ fn main() {
 }
 
 fn frames(style: DriveStyle) -> Vec<(u64, IntakeReadings, TurboInput)> {
-    let sc = TurboScenario::new("bench", 120.0, 11, style);
-    TurboSim::from_scenario(&sc, "bench")
+    scenario_frames(&TurboScenario::new("bench", 120.0, 11, style))
+}
+
+fn scenario_frames(sc: &TurboScenario) -> Vec<(u64, IntakeReadings, TurboInput)> {
+    TurboSim::from_scenario(sc, "bench")
         .expect("scenario")
         .map(|f| {
             (
@@ -49,14 +55,7 @@ fn frames(style: DriveStyle) -> Vec<(u64, IntakeReadings, TurboInput)> {
         .collect()
 }
 
-#[divan::bench(args = ["city", "highway", "tip_in_out"], sample_count = 200, sample_size = 64)]
-fn turbo_monitor_frame(bencher: Bencher, style: &str) {
-    let style = match style {
-        "city" => DriveStyle::City,
-        "highway" => DriveStyle::Highway,
-        _ => DriveStyle::TipInOut,
-    };
-    let data = frames(style);
+fn monitor() -> TurboMonitor {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/turbo_monitor_tsfs09.toml");
     let cfg = TurboConfig::load(Some(&path)).expect("monitor file");
     let table = SignalTable::with_names(
@@ -74,7 +73,54 @@ fn turbo_monitor_frame(bencher: Bencher, style: &str) {
         250_000_000,
     )
     .expect("table");
-    let mut mon = TurboMonitor::new(&cfg.params, &cfg.monitor, &table).expect("monitor");
+    TurboMonitor::new(&cfg.params, &cfg.monitor, &table).expect("monitor")
+}
+
+/// A 300 s city drive with `fault` from 150 s (the seeds of `tests/turbo_monitor.rs`' large
+/// faults).
+#[divan::bench(args = ["maf_gain_0.85", "leak_im_8mm"], sample_count = 3000, sample_size = 1)]
+fn turbo_monitor_fault_frame(bencher: Bencher, fault: &str) {
+    use fdd_fixtures::turbo_faults::{TurboFault, TurboFaultSpec};
+    let (seed, fault) = match fault {
+        "maf_gain_0.85" => (4100, TurboFault::WafGain { gain_pct: 85 }),
+        _ => (4200, TurboFault::LeakIm { diameter_mm: 8 }),
+    };
+    let mut sc = TurboScenario::new("bench", 300.0, seed, DriveStyle::City);
+    sc.fault = TurboFaultSpec {
+        fault,
+        start_s: 150.0,
+        end_s: None,
+    };
+    let data = scenario_frames(&sc);
+    let mut mon = monitor();
+    mon.start_operation_cycle(0, &mut |_| {});
+    let onset = data.len() / 2;
+    for (t, r, u) in &data[..onset] {
+        mon.process_frame(*t, r, u, None, &mut |_| {});
+    }
+    let timed = &data[onset..];
+    let mut k = 0usize;
+    bencher.bench_local(|| {
+        // 3000 samples: the 150 s after the onset, once.
+        let (t, r, u) = &timed[k.min(timed.len() - 1)];
+        let t = *t + (k.saturating_sub(timed.len() - 1) as u64) * 50_000_000;
+        k += 1;
+        let mut sink = |o: fdd_monitor::monitor::Output<'_>| {
+            divan::black_box(o);
+        };
+        mon.process_frame(t, divan::black_box(r), divan::black_box(u), None, &mut sink);
+    });
+}
+
+#[divan::bench(args = ["city", "highway", "tip_in_out"], sample_count = 200, sample_size = 64)]
+fn turbo_monitor_frame(bencher: Bencher, style: &str) {
+    let style = match style {
+        "city" => DriveStyle::City,
+        "highway" => DriveStyle::Highway,
+        _ => DriveStyle::TipInOut,
+    };
+    let data = frames(style);
+    let mut mon = monitor();
     mon.start_operation_cycle(0, &mut |_| {});
     let half = data.len() / 2;
     for (t, r, u) in &data[..half] {
