@@ -48,6 +48,9 @@ fn observer_meets_the_papers_figures_on_the_real_transients() {
         // p_im error.
         assert!(num(&r, &[log, "ve_error_removed_pct"]) >= 80.0, "{log}");
         assert!(num(&r, &[log, "ve_error_plain_pa"]).abs() > 500.0, "{log}");
+        // The air-flow estimate follows the sensor (2.7 % and 1.0 % RMS) and is less noisy.
+        assert!(num(&r, &[log, "maf_rms_pct"]) <= 5.0, "{log}");
+        assert!(num(&r, &[log, "maf_noise_ratio_pct"]) < 100.0, "{log}");
     }
     // The lag is timed around throttle steps; only the tuning log has them.
     let lag = num(&r, &["tuning", "p_im_lag_samples"]);

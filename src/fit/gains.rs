@@ -359,9 +359,9 @@ fn from_map(
         format!("the engine map {d}/engine_map.csv (`state_noise_from_map`: a volume's mass error"),
         "from its pressure error, the compressor outlet the intercooler's errors, dC_eta_vol the".into(),
         "relative air-flow error times the efficiency factor; a node takes the mean of the 4 nearest".into(),
-        format!("map points); the turbo speed's entry {q_speed:.0} rad/s, the model's stationary turbo speed"),
-        format!("against the measured one at the stationary start of {} ({:.0} rpm read off", repro::TUNING_LOG, speed * 60.0 / std::f64::consts::TAU),
-        format!("the map). Every entry floored at {} % of the state's scale.", 100.0 * Q_FLOOR_FRACTION),
+        format!("map points); the turbo speed's entry {q_speed:.0} rad/s, the RMS of the model's stationary turbo"),
+        format!("speed against the measured one over the stationary segments of {} ({:.0} rpm read", repro::TUNING_LOG, speed * 60.0 / std::f64::consts::TAU),
+        format!("off the map). Every entry floored at {} % of the state's scale.", 100.0 * Q_FLOOR_FRACTION),
         format!("Operating points: ambient {ambient:.0} Pa (the map's air filter fit), {:.0} K, lambda 1;", repro::AMBIENT_TEMPERATURE_K),
         "actuator path with the wastegate fully open while the throttle opens, then closing.".into(),
     ];

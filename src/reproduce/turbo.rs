@@ -22,19 +22,23 @@
 //!   1,050-1,300 rpm and 86 kPa with its wastegate a quarter open, and with it closed (the
 //!   paper's choice) its stationary point at the log's start had 125 kPa of boost, a manifold
 //!   pressure 10 kPa above the sensor's and a turbo speed 1.7 times the measured one; with the
-//!   fitted loss the map's opening there is about closed (0.001); lambda 1 where not logged; ambient pressure the map's fitted one, ambient temperature
-//!   298 K (the compressor map's reference; the logs have no ambient temperature).
+//!   fitted loss the map's opening there is about closed (0.001); lambda 1 where not logged;
+//!   ambient pressure the map's fitted one, ambient temperature 298 K (the compressor map's
+//!   reference; the logs have no ambient temperature).
 //! - **Sensors**: `p_im` and the air flow (the transients log no boost pressure); the turbo
 //!   speed is measured but kept out of the observer, to judge its estimate.
 //! - **Noise**: `R` = each sensor's variance about its mean over the tuning log's stationary
 //!   start (before the first throttle change), floored at [`R_FLOOR_REL`] of the mean squared;
 //!   `Q` from the model's stationary error at the engine-map points
 //!   ([`fdd_estimators::models::turbo::observer::design::state_noise_from_map`]); the turbo
-//!   speed's entry from the tuning log's stationary start (model at the stationary point of the
-//!   start's inputs against the measured speed).
+//!   speed's entry the RMS over the tuning log's stationary segments of the model's stationary
+//!   speed at the segment's inputs against the measured mean there (the shaft's loss torque is
+//!   fitted to the first segment, so that one alone would say the model is exact).
 //! - **Gains** on [`GRID_SPEEDS_RPM`] x [`GRID_PRESSURES_KPA`], bilinear (the paper's nearest
 //!   node for comparison); 80 Hz (the logs' rate).
 //! - **Figures** per log: the turbo speed estimate's RMS error in % of the measured mean; the
+//!   air-flow estimate against the sensor (RMS difference in % of the sensor's mean, and its
+//!   noise against the sensor's on the stationary segments); the
 //!   `p_im` estimate's noise against the sensor's (standard deviations about a straight line on
 //!   the stationary segments: from 1 s after an input step to the next); its lag behind the
 //!   sensor (the cross-correlation's peak, sub-sample by a parabola, positive = estimate
@@ -434,6 +438,10 @@ pub struct LogFigures {
     pub p_im_estimate_noise_pa: f64,
     /// Their ratio (%).
     pub p_im_noise_ratio_pct: f64,
+    /// Air-flow estimate against the sensor: RMS difference, % of the sensor's mean.
+    pub maf_rms_pct: f64,
+    /// Air-flow estimate noise std over the sensor's on the stationary segments (%).
+    pub maf_noise_ratio_pct: f64,
     /// Lag of the estimate behind the sensor around the throttle steps (samples of 12.5 ms;
     /// None without a throttle step).
     pub p_im_lag_samples: Option<f64>,
@@ -754,6 +762,8 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
             set,
         )?;
         let sensor_noise = pooled_noise(&tr.t, &tr.p_im_pa, &segs);
+        let maf_sensor_noise = pooled_noise(&tr.t, &tr.maf_kg_s, &segs);
+        let maf_est_noise = pooled_noise(&tr.t, &bil.maf_kg_s, &segs);
         let est_noise = pooled_noise(&tr.t, &bil.p_im_pa, &segs);
         let near_noise = pooled_noise(&tr.t, &near.p_im_pa, &segs);
         let nom_plain = run_observer(
@@ -777,6 +787,8 @@ pub fn run(s: &TurboSettings) -> Result<TurboReport, TurboReproError> {
             p_im_sensor_noise_pa: sensor_noise,
             p_im_estimate_noise_pa: est_noise,
             p_im_noise_ratio_pct: 100.0 * est_noise / sensor_noise,
+            maf_rms_pct: rms_pct(&bil.maf_kg_s, &tr.maf_kg_s),
+            maf_noise_ratio_pct: 100.0 * maf_est_noise / maf_sensor_noise,
             p_im_lag_samples: step_lag(&tr.p_im_pa, &bil.p_im_pa, &windows),
             nearest_noise_ratio_pct: 100.0 * near_noise / sensor_noise,
             nearest_lag_samples: step_lag(&tr.p_im_pa, &near.p_im_pa, &windows),
@@ -877,7 +889,7 @@ pub fn render(r: &TurboReport) -> String {
     );
     let _ = writeln!(s, "{:<44} {:>14} {:>14}", "figure", "tuning", "held-out");
     type Row = (&'static str, fn(&LogFigures) -> Option<f64>);
-    let rows: [Row; 15] = [
+    let rows: [Row; 17] = [
         ("engine speed used (rpm)", |f| Some(f.engine_speed_rpm)),
         ("wastegate from the map (-)", |f| f.wastegate_frac),
         ("turbo speed RMS error (%)", |f| Some(f.turbo_speed_rms_pct)),
@@ -897,6 +909,10 @@ pub fn render(r: &TurboReport) -> String {
         ("  nearest-node gains (%)", |f| {
             Some(f.nearest_noise_ratio_pct)
         }),
+        ("air flow estimate - sensor, RMS (%)", |f| {
+            Some(f.maf_rms_pct)
+        }),
+        ("air flow noise ratio (%)", |f| Some(f.maf_noise_ratio_pct)),
         ("p_im lag (samples of 12.5 ms)", |f| f.p_im_lag_samples),
         ("  nearest-node gains (samples)", |f| f.nearest_lag_samples),
         ("VE -5 %: stationary p_im error plain (Pa)", |f| {
