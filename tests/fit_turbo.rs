@@ -554,3 +554,26 @@ fn bad_input_errors_name_file_line_and_column() {
     let e = fit_error(dir.path());
     assert!(e.contains("engine_map.csv") && e.contains("line 6"), "{e}");
 }
+
+#[test]
+fn a_missing_or_unusable_transient_is_named() {
+    // The maps intact but no throttle-step log: the shaft fit's log is named.
+    let dir = broken_data(|t| t.to_string());
+    let err = fit_error(dir.path());
+    assert!(
+        err.contains("shaft's loss torque") && err.contains("grupp1_airstep.mcap"),
+        "{err}"
+    );
+    // In its place a log without a stationary start: grupp2's wastegate position moves by more
+    // than 2 %-points between two samples 0.31 s after its start.
+    std::fs::copy(
+        root().join(DATA).join("grupp2_wastegate.mcap"),
+        dir.path().join("grupp1_airstep.mcap"),
+    )
+    .expect("copy");
+    let err = fit_error(dir.path());
+    assert!(
+        err.contains("grupp1_airstep.mcap") && err.contains("stationary start"),
+        "{err}"
+    );
+}

@@ -147,11 +147,11 @@ pub enum FitIoError {
         need: usize,
     },
     /// The log that anchors the shaft's loss torque cannot be used.
-    #[error("{}: {message}", file.display())]
+    #[error("the log the shaft's loss torque is fitted to: {message}")]
     Anchor {
         /// The log.
         file: PathBuf,
-        /// What is wrong.
+        /// What is wrong (the reader's and the reproduction's errors name the log).
         message: String,
     },
     /// A fit or the check failed.
