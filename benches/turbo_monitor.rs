@@ -26,11 +26,14 @@ fn main() {
     divan::main();
 }
 
-fn frames(style: DriveStyle) -> Vec<(u64, IntakeReadings, TurboInput)> {
+/// One frame: its time (ns), readings and inputs.
+type Frame = (u64, IntakeReadings, TurboInput);
+
+fn frames(style: DriveStyle) -> Vec<Frame> {
     scenario_frames(&TurboScenario::new("bench", 120.0, 11, style))
 }
 
-fn scenario_frames(sc: &TurboScenario) -> Vec<(u64, IntakeReadings, TurboInput)> {
+fn scenario_frames(sc: &TurboScenario) -> Vec<Frame> {
     TurboSim::from_scenario(sc, "bench")
         .expect("scenario")
         .map(|f| {
@@ -76,6 +79,18 @@ fn monitor() -> TurboMonitor {
     TurboMonitor::new(&cfg.params, &cfg.monitor, &table).expect("monitor")
 }
 
+/// A monitor that has run the first half of `data` (from an operation cycle's start), and the
+/// second half, to time.
+fn warmed(data: &[Frame]) -> (TurboMonitor, &[Frame]) {
+    let mut mon = monitor();
+    mon.start_operation_cycle(0, &mut |_| {});
+    let half = data.len() / 2;
+    for (t, r, u) in &data[..half] {
+        mon.process_frame(*t, r, u, None, &mut |_| {});
+    }
+    (mon, &data[half..])
+}
+
 /// A 300 s city drive with `fault` from 150 s (the seeds of `tests/turbo_monitor.rs`' large
 /// faults).
 #[divan::bench(args = ["maf_gain_0.85", "leak_im_8mm"], sample_count = 3000, sample_size = 1)]
@@ -92,13 +107,7 @@ fn turbo_monitor_fault_frame(bencher: Bencher, fault: &str) {
         end_s: None,
     };
     let data = scenario_frames(&sc);
-    let mut mon = monitor();
-    mon.start_operation_cycle(0, &mut |_| {});
-    let onset = data.len() / 2;
-    for (t, r, u) in &data[..onset] {
-        mon.process_frame(*t, r, u, None, &mut |_| {});
-    }
-    let timed = &data[onset..];
+    let (mut mon, timed) = warmed(&data);
     let mut k = 0usize;
     bencher.bench_local(|| {
         // 3000 samples: the 150 s after the onset, once.
@@ -120,13 +129,7 @@ fn turbo_monitor_frame(bencher: Bencher, style: &str) {
         _ => DriveStyle::TipInOut,
     };
     let data = frames(style);
-    let mut mon = monitor();
-    mon.start_operation_cycle(0, &mut |_| {});
-    let half = data.len() / 2;
-    for (t, r, u) in &data[..half] {
-        mon.process_frame(*t, r, u, None, &mut |_| {});
-    }
-    let timed = &data[half..];
+    let (mut mon, timed) = warmed(&data);
     let period = timed.get(1).map_or(50_000_000, |b| b.0 - timed[0].0);
     let mut k = 0u64;
     bencher.bench_local(|| {
