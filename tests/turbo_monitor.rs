@@ -1,7 +1,7 @@
 //! The air-path monitor (monitor/src/turbo/): its configuration files load, a fault-free
 //! simulated city drive raises no DTC, a frame allocates nothing, and on the calibrated
-//! TSFS09 monitor file large sensor and leak faults raise a DTC after their onset and none
-//! before. (The figures over the held-out set are `fdd evaluate`'s, in the README.)
+//! TSFS09 monitor file large sensor, leak and wastegate faults raise a DTC after their onset and
+//! none before. (The figures over the held-out set are `fdd evaluate`'s, in the README.)
 
 use std::path::PathBuf;
 
@@ -95,7 +95,7 @@ fn the_configuration_files_load_and_name_their_parameter_files() {
     std::fs::write(&f, "params = \"nowhere.toml\"\n").expect("write");
     let e = TurboConfig::load(Some(&f)).unwrap_err().to_string();
     assert!(e.contains("nowhere.toml"), "{e}");
-    assert_eq!(EVENT_NAMES.len(), 7);
+    assert_eq!(EVENT_NAMES.len(), 9);
 }
 
 #[test]
@@ -146,6 +146,26 @@ fn large_faults_raise_a_dtc_after_their_onset_and_none_before() {
                 TurboFault::LeakIm { diameter_mm: 8 },
             ),
             &["turbo_intake_leak", "turbo_air_path_group"][..],
+        ),
+        // The wastegate's only residual is the boost: stuck closed under the boost controller
+        // (which then commands it open) the boost reads above what the command gives.
+        (
+            faulty(
+                "wastegate closed",
+                4_300,
+                DriveStyle::TipInOut,
+                TurboFault::WgStuckClosed,
+            ),
+            &["turbo_overboost"][..],
+        ),
+        (
+            faulty(
+                "wastegate open",
+                4_400,
+                DriveStyle::Highway,
+                TurboFault::WgStuckOpen,
+            ),
+            &["turbo_underboost"][..],
         ),
     ] {
         let (failed, _, _) = run(&sc, f64::INFINITY);

@@ -30,7 +30,10 @@ use fdd_monitor::monitor::Output;
 use fdd_monitor::runtime::config::TruthConfig;
 use fdd_monitor::runtime::Runtime;
 use fdd_monitor::turbo::config::{TurboConfig, DEFAULT_TURBO_MONITOR_TOML};
-use fdd_monitor::turbo::{RESIDUAL_ESTIMATES, TEST_NAMES};
+use fdd_monitor::turbo::{N_RESIDUALS, RESIDUAL_ESTIMATES, R_BOOST, TEST_NAMES};
+
+/// Residuals (rows of the maps).
+const N: usize = N_RESIDUALS;
 
 use super::{
     block_max, monitor_text, parse_doc, refuse_fault, replay_input, runtime_naming,
@@ -61,6 +64,12 @@ pub const THRESHOLD_FLOOR: f64 = 10.0;
 pub const MIN_BLOCKS: usize = 100;
 /// The `[monitor]` key of each residual's threshold (one array).
 const THRESHOLD_KEY: &str = "cusum_threshold";
+/// Residuals the logs may leave untested: the shaft's balance needs boost, which a city cycle
+/// on a large engine may never reach. Its test is then switched off in the file written
+/// (`shaft_test = false`) rather than run on scales nothing calibrated; the others are needed.
+const OPTIONAL: [bool; N] = [false, false, false, true];
+/// The `[monitor]` key that switches the shaft's test.
+const SHAFT_KEY: &str = "shaft_test";
 
 /// The result: the map, scales and thresholds, and the configuration texts to write.
 #[derive(Debug, Clone)]
@@ -69,11 +78,11 @@ pub struct TurboCalibration {
     pub hours: f64,
     /// Nodes kept and the map's rows.
     pub map_load: Vec<f64>,
-    pub map: Vec<[f64; 3]>,
-    pub scale_map: Vec<[f64; 3]>,
+    pub map: Vec<[f64; N]>,
+    pub scale_map: Vec<[f64; N]>,
     /// Tested time at each node (s of weight).
     pub node_s: Vec<f64>,
-    pub scales: [f64; 3],
+    pub scales: [f64; N],
     pub largest_offset: f64,
     pub adapt_limit: f64,
     pub tests: Vec<TurboThreshold>,
@@ -88,6 +97,8 @@ pub struct TurboCalibration {
 #[derive(Debug, Clone)]
 pub struct TurboThreshold {
     pub test: &'static str,
+    /// Whether the logs reached the test (an optional one they did not is switched off).
+    pub active: bool,
     /// Blocks in which the test ran, and those in which the CUSUM rose above 0.
     pub blocks: usize,
     pub rose: usize,
@@ -102,20 +113,20 @@ struct Collector {
     block_ns: u64,
     /// This frame's deviations, offsets and load (the estimates in [`RESIDUAL_ESTIMATES`]
     /// order), complete when the load arrives.
-    frame: [f64; 7],
+    frame: [f64; 2 * N + 1],
     /// Per log (one entry each, a few hundred bytes: memory does not grow with a log's
     /// length), per residual: sum and count of the relative residual ...
-    log_totals: Vec<[(f64, u64); 3]>,
+    log_totals: Vec<[(f64, u64); N]>,
     /// ... and per node of [`MAP_NODES`] its weighted sum and weight.
     log_nodes: Vec<NodeSums>,
     /// Per node and residual: the weighted sum of squared deviations and the weight (pass 2).
     dev_nodes: NodeSums,
     /// Per residual: sum of squares and count of tested deviations (pass 2).
-    dev_sq: [f64; 3],
-    dev_n: [u64; 3],
+    dev_sq: [f64; N],
+    dev_n: [u64; N],
     largest_offset: f64,
-    maxima: [Vec<(f64, usize, f64)>; 3],
-    current: [Option<(u64, f64)>; 3],
+    maxima: [Vec<(f64, usize, f64)>; N],
+    current: [Option<(u64, f64)>; N],
     log_index: usize,
     frame_dt_s: f64,
     fault: Option<(String, f64)>,
@@ -128,15 +139,15 @@ impl Collector {
     fn new(block_s: f64, frame_dt_s: f64) -> Self {
         Self {
             block_ns: (block_s * 1e9) as u64,
-            frame: [f64::NAN; 7],
+            frame: [f64::NAN; 2 * N + 1],
             log_totals: Vec::new(),
             log_nodes: Vec::new(),
             dev_nodes: NodeSums::default(),
-            dev_sq: [0.0; 3],
-            dev_n: [0; 3],
+            dev_sq: [0.0; N],
+            dev_n: [0; N],
             largest_offset: 0.0,
             maxima: Default::default(),
-            current: [None; 3],
+            current: [None; N],
             log_index: 0,
             frame_dt_s,
             fault: None,
@@ -147,16 +158,16 @@ impl Collector {
     }
 
     fn take_frame(&mut self) {
-        let load = self.frame[6];
-        for i in 0..3 {
-            self.add(i, self.frame[i], self.frame[3 + i], load);
+        let load = self.frame[2 * N];
+        for i in 0..N {
+            self.add(i, self.frame[i], self.frame[N + i], load);
         }
-        self.frame = [f64::NAN; 7];
+        self.frame = [f64::NAN; 2 * N + 1];
     }
 
     /// A new log's accumulators.
     fn start_log(&mut self) {
-        self.log_totals.push([(0.0, 0); 3]);
+        self.log_totals.push([(0.0, 0); N]);
         self.log_nodes.push(NodeSums::default());
     }
 
@@ -183,8 +194,8 @@ impl Collector {
 /// Per node of [`MAP_NODES`] and residual: a weighted sum and its weight (frames).
 #[derive(Debug, Clone, Copy, Default)]
 struct NodeSums {
-    sum: [[f64; 3]; MAP_NODES.len()],
-    weight: [[f64; 3]; MAP_NODES.len()],
+    sum: [[f64; N]; MAP_NODES.len()],
+    weight: [[f64; N]; MAP_NODES.len()],
 }
 
 impl NodeSums {
@@ -197,7 +208,7 @@ impl NodeSums {
     }
 
     /// The weighted mean at each node (NaN without weight) and the weights.
-    fn means(&self) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+    fn means(&self) -> (Vec<[f64; N]>, Vec<[f64; N]>) {
         let mean = self
             .sum
             .iter()
@@ -210,7 +221,7 @@ impl NodeSums {
 
 impl ReplayObserver for Collector {
     fn begin_log(&mut self, _rt: &Runtime, _truths: &[TruthConfig]) {
-        self.current = [None; 3];
+        self.current = [None; N];
         self.first_ns = None;
         self.start_log();
     }
@@ -253,7 +264,7 @@ impl ReplayObserver for Collector {
 
     fn end_log(&mut self) {
         // The last, partial block is dropped.
-        self.current = [None; 3];
+        self.current = [None; N];
         if let Some(a) = self.first_ns {
             self.total_ns += self.last_ns.saturating_sub(a);
         }
@@ -295,15 +306,17 @@ fn node_weights(load: f64) -> [(usize, f64); 2] {
 /// Rows at the nodes `keep` of [`MAP_NODES`]: a residual with less than `min_w` of weight at
 /// a node takes its value at the nearest kept node where it has enough (flat beyond its
 /// data).
+/// Residuals not `active` get `off_value` at every node.
 fn fill_rows(
     keep: &[usize],
-    mean: &[[f64; 3]],
-    w: &[[f64; 3]],
+    mean: &[[f64; N]],
+    w: &[[f64; N]],
     min_w: f64,
     frame_dt_s: f64,
-) -> Result<Vec<[f64; 3]>, CalibrateError> {
-    let mut rows: Vec<[f64; 3]> = vec![[f64::NAN; 3]; keep.len()];
-    for i in 0..3 {
+    (active, off_value): ([bool; N], f64),
+) -> Result<Vec<[f64; N]>, CalibrateError> {
+    let mut rows: Vec<[f64; N]> = vec![[off_value; N]; keep.len()];
+    for i in (0..N).filter(|&i| active[i]) {
         let own: Vec<usize> = (0..keep.len())
             .filter(|&k| w[keep[k]][i] >= min_w)
             .collect();
@@ -332,13 +345,18 @@ fn fill_rows(
 /// [`MIN_NODE_S`] of data; the throttle residuals are not tested near full load), their
 /// indices in [`MAP_NODES`], rows and tested time (s).
 fn fit_map(c: &Collector) -> Result<FittedMap, CalibrateError> {
-    let mut level = [0.0; 3];
+    let mut level = [0.0; N];
+    let mut active = [true; N];
     for (i, l) in level.iter_mut().enumerate() {
         let (sum, n) = c
             .log_totals
             .iter()
             .fold((0.0, 0u64), |(s, n), t| (s + t[i].0, n + t[i].1));
         if n == 0 {
+            if OPTIONAL[i] {
+                active[i] = false;
+                continue;
+            }
             return Err(CalibrateError::NoData(TEST_NAMES[i]));
         }
         *l = sum / n as f64;
@@ -346,7 +364,7 @@ fn fit_map(c: &Collector) -> Result<FittedMap, CalibrateError> {
     // Each log's residuals about its own mean `m`: at a node, sum(w (rel - m)) = S - m W.
     let mut centred = NodeSums::default();
     for (t, nodes) in c.log_totals.iter().zip(&c.log_nodes) {
-        for i in (0..3).filter(|&i| t[i].1 > 0) {
+        for i in (0..N).filter(|&i| t[i].1 > 0) {
             let m = t[i].0 / t[i].1 as f64;
             for j in 0..MAP_NODES.len() {
                 centred.sum[j][i] += nodes.sum[j][i] - m * nodes.weight[j][i];
@@ -356,12 +374,18 @@ fn fit_map(c: &Collector) -> Result<FittedMap, CalibrateError> {
     }
     let (mean, w) = centred.means();
     let min_w = MIN_NODE_S / c.frame_dt_s;
+    // An optional residual without a node of enough data is off too.
+    for i in (0..N).filter(|&i| OPTIONAL[i]) {
+        if !w.iter().any(|r| r[i] >= min_w) {
+            active[i] = false;
+        }
+    }
     let keep: Vec<usize> = (0..MAP_NODES.len())
-        .filter(|&j| (0..3).any(|i| w[j][i] >= min_w))
+        .filter(|&j| (0..N).any(|i| active[i] && w[j][i] >= min_w))
         .collect();
-    let mut rows = fill_rows(&keep, &mean, &w, min_w, c.frame_dt_s)?;
+    let mut rows = fill_rows(&keep, &mean, &w, min_w, c.frame_dt_s, (active, 0.0))?;
     for r in &mut rows {
-        for i in 0..3 {
+        for i in 0..N {
             r[i] += level[i];
         }
     }
@@ -375,6 +399,7 @@ fn fit_map(c: &Collector) -> Result<FittedMap, CalibrateError> {
         keep,
         rows,
         node_s,
+        active,
     })
 }
 
@@ -383,20 +408,22 @@ fn fit_map(c: &Collector) -> Result<FittedMap, CalibrateError> {
 struct FittedMap {
     nodes: Vec<f64>,
     keep: Vec<usize>,
-    rows: Vec<[f64; 3]>,
+    rows: Vec<[f64; N]>,
     node_s: Vec<f64>,
+    /// Residuals with data (the others' tests are switched off, see [`OPTIONAL`]).
+    active: [bool; N],
 }
 
 /// The maps written into a monitor file: nodes, offsets and scales (rows per node).
 #[derive(Debug, Clone, Copy)]
 struct Maps<'a> {
     nodes: &'a [f64],
-    offsets: &'a [[f64; 3]],
-    scales: &'a [[f64; 3]],
+    offsets: &'a [[f64; N]],
+    scales: &'a [[f64; N]],
 }
 
 impl<'a> Maps<'a> {
-    fn new(nodes: &'a [f64], offsets: &'a [[f64; 3]], scales: &'a [[f64; 3]]) -> Option<Self> {
+    fn new(nodes: &'a [f64], offsets: &'a [[f64; N]], scales: &'a [[f64; N]]) -> Option<Self> {
         Some(Self {
             nodes,
             offsets,
@@ -411,6 +438,7 @@ fn with_keys(
     text: &str,
     origin: &str,
     numbers: &[(&str, f64)],
+    flags: &[(&str, bool)],
     arrays: &[(&str, &[f64])],
     map: Option<Maps<'_>>,
     params: &str,
@@ -421,6 +449,9 @@ fn with_keys(
         doc["monitor"] = toml_edit::table();
     }
     for (k, v) in numbers {
+        doc["monitor"][*k] = toml_edit::value(*v);
+    }
+    for (k, v) in flags {
         doc["monitor"][*k] = toml_edit::value(*v);
     }
     // Six decimals: far below any scale, and a file one reads.
@@ -434,7 +465,7 @@ fn with_keys(
     for (k, v) in arrays {
         doc["monitor"][*k] = toml_edit::value(array(v));
     }
-    let rows = |rows: &[[f64; 3]]| {
+    let rows = |rows: &[[f64; N]]| {
         let mut a = toml_edit::Array::new();
         for r in rows {
             a.push(array(r));
@@ -509,14 +540,15 @@ pub fn calibrate(
     // Frames are the sensors' samples; the monitor's frame period is not a setting: the
     // LiU-ICE logs and the simulator write 20 Hz (a node's weight is counted in frames).
     let frame_dt_s = 0.05;
-    let unreachable = [UNREACHABLE_CUSUM; 3];
+    let unreachable = [UNREACHABLE_CUSUM; N];
 
-    let neutral = [PASS_SCALE; 3];
-    // Pass 1: the map.
+    let neutral = [PASS_SCALE; N];
+    // Pass 1: the map (every test on, to see which the logs reach).
     let pass1 = with_keys(
         &text,
         &origin,
         &[("adapt_limit", WIDE_ADAPT_LIMIT)],
+        &[(SHAFT_KEY, true)],
         &[(THRESHOLD_KEY, &unreachable), ("residual_scale", &neutral)],
         Maps::new(&[], &[], &[]),
         &params_name,
@@ -528,32 +560,42 @@ pub fn calibrate(
         keep,
         rows: map,
         node_s,
+        active,
     } = fit_map(&c)?;
     drop(c);
+    let flags = [(SHAFT_KEY, active[R_BOOST])];
 
     // Pass 2: scales and the offsets' range with the map.
     let pass2 = with_keys(
         &text,
         &origin,
         &[("adapt_limit", WIDE_ADAPT_LIMIT)],
+        &flags,
         &[(THRESHOLD_KEY, &unreachable), ("residual_scale", &neutral)],
         Maps::new(&map_load, &map, &[]),
         &params_name,
     )?;
     let cfg = runtime_with_only(base, work.path(), &pass2, Only::Turbo)?;
     let c = pass(&logs, &cfg, opts.block_s, frame_dt_s)?;
-    let mut scales = [0.0; 3];
-    for i in 0..3 {
+    let mut scales = [PASS_SCALE; N];
+    for i in (0..N).filter(|&i| active[i]) {
         if c.dev_n[i] < 100 {
             return Err(CalibrateError::NoData(TEST_NAMES[i]));
         }
         scales[i] = (c.dev_sq[i] / c.dev_n[i] as f64).sqrt();
     }
     let (ms, w) = c.dev_nodes.means();
-    let scale_map: Vec<[f64; 3]> = fill_rows(&keep, &ms, &w, MIN_NODE_S / frame_dt_s, frame_dt_s)?
-        .into_iter()
-        .map(|r| r.map(f64::sqrt))
-        .collect();
+    let scale_map: Vec<[f64; N]> = fill_rows(
+        &keep,
+        &ms,
+        &w,
+        MIN_NODE_S / frame_dt_s,
+        frame_dt_s,
+        (active, PASS_SCALE * PASS_SCALE),
+    )?
+    .into_iter()
+    .map(|r| r.map(f64::sqrt))
+    .collect();
     let largest_offset = c.largest_offset;
     let adapt_limit = (ADAPT_MARGIN * largest_offset)
         .max(start.adapt_limit)
@@ -566,6 +608,7 @@ pub fn calibrate(
         &text,
         &origin,
         &numbers,
+        &flags,
         &[(THRESHOLD_KEY, &unreachable), ("residual_scale", &scales)],
         Maps::new(&map_load, &map, &scale_map),
         &params_name,
@@ -576,6 +619,18 @@ pub fn calibrate(
     let mut tests = Vec::new();
     for (i, name) in TEST_NAMES.iter().enumerate() {
         let blocks = c.maxima[i].len();
+        if !active[i] {
+            tests.push(TurboThreshold {
+                test: name,
+                active: false,
+                blocks,
+                rose: 0,
+                max: 0.0,
+                at: None,
+                threshold: UNREACHABLE_CUSUM,
+            });
+            continue;
+        }
         if blocks < MIN_BLOCKS {
             return Err(CalibrateError::Argument(format!(
                 "test `{name}`: tested in {blocks} blocks of {} s, at least {MIN_BLOCKS} are needed; give longer or more logs (steady driving: the tests wait for the pressures and the charge-air temperature to settle)",
@@ -590,6 +645,7 @@ pub fn calibrate(
         let rose = c.maxima[i].iter().filter(|m| m.0 > 0.0).count();
         tests.push(TurboThreshold {
             test: name,
+            active: true,
             blocks,
             rose,
             max,
@@ -602,6 +658,7 @@ pub fn calibrate(
         &text,
         &origin,
         &numbers,
+        &flags,
         &[(THRESHOLD_KEY, &thresholds), ("residual_scale", &scales)],
         Maps::new(&map_load, &map, &scale_map),
         &params_name,
@@ -637,8 +694,21 @@ impl TurboCalibration {
         use std::fmt::Write as _;
         let _ = writeln!(
             s,
-            "offset map (relative residuals cylinder_flow, throttle_flow, throttle_cylinder at p_im/p_amb; s of data):"
+            "offset map (relative residuals {} at p_im/p_amb; s of data):",
+            fdd_monitor::turbo::RESIDUALS.join(", ")
         );
+        let row = |r: &[f64; N], sign: bool| {
+            r.iter()
+                .map(|v| {
+                    if sign {
+                        format!("{v:+.4}")
+                    } else {
+                        format!("{v:.4}")
+                    }
+                })
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
         for (((x, r), q), w) in self
             .map_load
             .iter()
@@ -648,14 +718,17 @@ impl TurboCalibration {
         {
             let _ = writeln!(
                 s,
-                "  {x:>4.2}  {:+.4} {:+.4} {:+.4}   scales {:.4} {:.4} {:.4}  ({w:.0} s)",
-                r[0], r[1], r[2], q[0], q[1], q[2]
+                "  {x:>4.2}  {}   scales {}  ({w:.0} s)",
+                row(r, true),
+                row(q, false)
             );
         }
         let _ = writeln!(
             s,
-            "scales {:.4} {:.4} {:.4} (std of the tested deviations); largest learned offset {:.4}, adapt_limit {:.3}",
-            self.scales[0], self.scales[1], self.scales[2], self.largest_offset, self.adapt_limit
+            "scales {} (std of the tested deviations); largest learned offset {:.4}, adapt_limit {:.3}",
+            row(&self.scales, false),
+            self.largest_offset,
+            self.adapt_limit
         );
         let _ = writeln!(
             s,
@@ -666,7 +739,14 @@ impl TurboCalibration {
             "{:<24} {:>6} {:>6} {:>10} {:>10}   largest in",
             "test", "blocks", "rose", "max seen", "threshold"
         );
-        for t in &self.tests {
+        for t in self.tests.iter().filter(|t| !t.active) {
+            let _ = writeln!(
+                s,
+                "{:<24} off: the logs never reached it (no boost above boost_ratio_min; shaft_test = false)",
+                t.test
+            );
+        }
+        for t in self.tests.iter().filter(|t| t.active) {
             let at = t.at.as_ref().map_or(String::from("-"), |(f, ts)| {
                 format!("{} at {ts:.1} s", f.display())
             });
@@ -707,7 +787,7 @@ mod tests {
             for k in 0..4000 {
                 let l = 0.3 + 0.6 * (k as f64 / 3999.0);
                 // Deviation and learned offset as the monitor reports them: their sum is rel.
-                for i in 0..3 {
+                for i in 0..N {
                     c.add(i, shape(l), off, l);
                 }
             }
@@ -717,7 +797,10 @@ mod tests {
             keep,
             rows,
             node_s,
+            active,
         } = fit_map(&c).expect("map");
+        // Every residual had data, the optional one too.
+        assert_eq!(active, [true; N]);
         assert_eq!(nodes.len(), keep.len());
         assert!(nodes.iter().all(|&x| (0.3..=0.9).contains(&x)), "{nodes:?}");
         assert!(node_s.iter().all(|&s| s >= MIN_NODE_S), "{node_s:?}");
@@ -740,25 +823,40 @@ mod tests {
     #[test]
     fn rows_without_data_take_the_nearest_nodes_value() {
         let mean = vec![
-            [1.0, 10.0, 100.0],
-            [2.0, f64::NAN, 200.0],
-            [3.0, f64::NAN, 300.0],
+            [1.0, 10.0, 100.0, 7.0],
+            [2.0, f64::NAN, 200.0, 8.0],
+            [3.0, f64::NAN, 300.0, 9.0],
         ];
-        let w = vec![[50.0, 50.0, 50.0], [50.0, 0.0, 50.0], [50.0, 1.0, 50.0]];
-        let rows = fill_rows(&[0, 1, 2], &mean, &w, 10.0, 0.05).expect("rows");
+        let w = vec![
+            [50.0, 50.0, 50.0, 50.0],
+            [50.0, 0.0, 50.0, 50.0],
+            [50.0, 1.0, 50.0, 50.0],
+        ];
+        let all = ([true; N], f64::NAN);
+        let rows = fill_rows(&[0, 1, 2], &mean, &w, 10.0, 0.05, all).expect("rows");
         assert_eq!(
             rows,
-            vec![[1.0, 10.0, 100.0], [2.0, 10.0, 200.0], [3.0, 10.0, 300.0]]
+            vec![
+                [1.0, 10.0, 100.0, 7.0],
+                [2.0, 10.0, 200.0, 8.0],
+                [3.0, 10.0, 300.0, 9.0]
+            ]
         );
         // A residual with no node of enough data is refused, naming its test.
-        let w = vec![[50.0, 1.0, 50.0]; 3];
-        let e = fill_rows(&[0, 1, 2], &mean, &w, 10.0, 0.05)
+        let w = vec![[50.0, 1.0, 50.0, 50.0]; 3];
+        let e = fill_rows(&[0, 1, 2], &mean, &w, 10.0, 0.05, all)
             .unwrap_err()
             .to_string();
         assert!(
             e.contains("turbo_throttle_flow") && e.contains("0.2 s in all"),
             "{e}"
         );
+        // A residual switched off (the boost residual of logs that never reach it) is not
+        // refused: it takes the given value at every node.
+        let off = ([true, false, true, true], 0.25);
+        let rows = fill_rows(&[0, 1, 2], &mean, &w, 10.0, 0.05, off).expect("rows");
+        assert!(rows.iter().all(|r| r[1] == 0.25), "{rows:?}");
+        assert_eq!(rows[2], [3.0, 0.25, 300.0, 9.0]);
     }
 
     #[test]
@@ -768,11 +866,12 @@ mod tests {
             text,
             "t.toml",
             &[("adapt_limit", 0.2)],
-            &[("cusum_threshold", &[10.0, 20.0, 30.0])],
+            &[("shaft_test", false)],
+            &[("cusum_threshold", &[10.0, 20.0, 30.0, 40.0])],
             Maps::new(
                 &[0.3, 0.6],
-                &[[0.01, -0.02, 0.03]; 2],
-                &[[0.005, 0.002, 0.004]; 2],
+                &[[0.01, -0.02, 0.03, 0.04]; 2],
+                &[[0.005, 0.002, 0.004, 0.006]; 2],
             ),
             "p.toml",
         )
@@ -785,10 +884,11 @@ mod tests {
         )
         .expect("parses");
         assert_eq!(c.monitor.offset_map_load, vec![0.3, 0.6]);
-        assert_eq!(c.monitor.offset_map, vec![[0.01, -0.02, 0.03]; 2]);
-        assert_eq!(c.monitor.scale_map, vec![[0.005, 0.002, 0.004]; 2]);
-        assert_eq!(c.monitor.cusum_threshold, [10.0, 20.0, 30.0]);
+        assert_eq!(c.monitor.offset_map, vec![[0.01, -0.02, 0.03, 0.04]; 2]);
+        assert_eq!(c.monitor.scale_map, vec![[0.005, 0.002, 0.004, 0.006]; 2]);
+        assert_eq!(c.monitor.cusum_threshold, [10.0, 20.0, 30.0, 40.0]);
         assert_eq!(c.monitor.adapt_limit, 0.2);
+        assert!(!c.monitor.shaft_test);
         assert!(out.contains("params = \"p.toml\""), "{out}");
     }
 }

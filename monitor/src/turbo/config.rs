@@ -17,9 +17,18 @@ pub const DEFAULT_TURBO_PARAMS_TOML: &str = include_str!("../../../config/turbo_
 /// The name the embedded monitor file gives its parameter file.
 pub const DEFAULT_PARAMS_NAME: &str = "turbo_liu_ice.toml";
 
-/// The three residuals' names, in [`fdd_estimators::models::turbo::residuals::SIGNATURE`] row
-/// order.
-pub const RESIDUALS: [&str; 3] = ["cylinder_flow", "throttle_flow", "throttle_cylinder"];
+/// Number of residuals: the three intake-side flow balances and the boost.
+pub const N_RESIDUALS: usize = 4;
+/// The residuals' names: the three flow balances in
+/// [`fdd_estimators::models::turbo::residuals::SIGNATURE`] row order, then the boost reading
+/// against the boost the shaft's balance gives
+/// ([`fdd_estimators::models::turbo::shaft_balance`]).
+pub const RESIDUALS: [&str; N_RESIDUALS] = [
+    "cylinder_flow",
+    "throttle_flow",
+    "throttle_cylinder",
+    "boost_pressure",
+];
 
 /// `[monitor]` of the monitor file (every key optional).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -82,15 +91,21 @@ pub struct TurboMonitorConfig {
     /// low-passed; strictly increasing): the model's systematic error, which changes with the
     /// load, as the engine family's fault-free logs show it (`fdd calibrate`). Empty: no map.
     pub offset_map_load: Vec<f64>,
-    /// The map's value at each node, one `[cylinder_flow, throttle_flow, throttle_cylinder]`
-    /// row per node (relative residuals, -); linear between nodes, constant beyond the ends.
+    /// The map's value at each node, one `[cylinder_flow, throttle_flow, throttle_cylinder,
+    /// boost_pressure]` row per node (relative residuals, -: the flows over the cylinder flow,
+    /// the boost over the ambient pressure); linear between nodes, constant beyond the ends.
     /// The learned offsets come on top of it.
-    pub offset_map: Vec<[f64; 3]>,
+    pub offset_map: Vec<[f64; N_RESIDUALS]>,
     /// Each residual's scale at the map's nodes (rows as `offset_map`, -): the model's error
     /// differs from engine to engine more at some loads than at others (near full boost
     /// most), so a test is as sensitive as the model is good where the engine runs. Empty:
     /// `residual_scale` everywhere.
-    pub scale_map: Vec<[f64; 3]>,
+    pub scale_map: Vec<[f64; N_RESIDUALS]>,
+    /// Whether the boost residual (the boost reading against the boost the shaft's balance
+    /// gives with the commanded wastegate) is computed and tested at all: `fdd calibrate`
+    /// turns it off when the fault-free logs leave it untested, so that no test runs on a
+    /// scale nothing calibrated.
+    pub shaft_test: bool,
     /// Time constant of the learned residual offsets (s).
     pub adapt_tau_s: f64,
     /// Each offset learns alone (at `adapt_tau_s`) for this much of its residual's tested
@@ -101,7 +116,7 @@ pub struct TurboMonitorConfig {
     pub adapt_limit: f64,
     /// Scale of each relative residual (its fault-free standard deviation after the offset),
     /// in [`RESIDUALS`] order; `scale_map`, when given, replaces it.
-    pub residual_scale: [f64; 3],
+    pub residual_scale: [f64; N_RESIDUALS],
     /// Twice the smallest CUSUM reference, in scales (the reference is also at least half
     /// `min_shift`).
     pub cusum_min_bias_sigma: f64,
@@ -112,7 +127,7 @@ pub struct TurboMonitorConfig {
     /// the residuals by a few percent as the load changes, is neither accumulated nor frozen.
     pub min_shift: f64,
     /// Threshold of each residual's two-sided CUSUM, in [`RESIDUALS`] order.
-    pub cusum_threshold: [f64; 3],
+    pub cusum_threshold: [f64; N_RESIDUALS],
     /// After the first residual alarm, how long the bank goes on collecting frames before it
     /// decides (s).
     pub decision_window_s: f64,
@@ -135,6 +150,12 @@ pub struct TurboMonitorConfig {
     /// DTC of a throttle body / actuator fault (the throttle passes other than its position
     /// says).
     pub dtc_throttle: String,
+    /// DTC of boost below what the commanded wastegate gives (the boost residual alone: the
+    /// wastegate more open than commanded, or the turbo weaker than the model).
+    pub dtc_underboost: String,
+    /// DTC of boost above what the commanded wastegate gives (the boost residual alone: the
+    /// wastegate more closed than commanded).
+    pub dtc_overboost: String,
     /// DTC of an air-path fault detected and not isolated (the candidates name the faults
     /// still possible).
     pub dtc_group: String,
@@ -165,13 +186,14 @@ impl Default for TurboMonitorConfig {
             offset_map_load: Vec::new(),
             offset_map: Vec::new(),
             scale_map: Vec::new(),
+            shaft_test: true,
             adapt_tau_s: 5.0,
             adapt_min_s: 15.0,
             adapt_limit: 0.1,
-            residual_scale: [0.05, 0.025, 0.05],
+            residual_scale: [0.05, 0.025, 0.05, 0.05],
             cusum_min_bias_sigma: 1.0,
             min_shift: 0.05,
-            cusum_threshold: [200.0, 200.0, 200.0],
+            cusum_threshold: [200.0; N_RESIDUALS],
             decision_window_s: 2.0,
             isolation_min_probability: 0.9,
             heal_s: 10.0,
@@ -181,6 +203,8 @@ impl Default for TurboMonitorConfig {
             dtc_t_ic: "P0096-62".into(),
             dtc_leak: "P2279-64".into(),
             dtc_throttle: "P2119-00".into(),
+            dtc_underboost: "P0299-00".into(),
+            dtc_overboost: "P0234-00".into(),
             dtc_group: "P0068-62".into(),
         }
     }
@@ -311,6 +335,8 @@ impl TurboMonitorConfig {
             ("dtc_t_ic", &self.dtc_t_ic),
             ("dtc_leak", &self.dtc_leak),
             ("dtc_throttle", &self.dtc_throttle),
+            ("dtc_underboost", &self.dtc_underboost),
+            ("dtc_overboost", &self.dtc_overboost),
             ("dtc_group", &self.dtc_group),
         ])
     }
@@ -446,7 +472,7 @@ mod tests {
         // The maps: increasing nodes, one row per node.
         let c = TurboMonitorConfig {
             offset_map_load: vec![0.3, 0.3],
-            offset_map: vec![[0.0; 3]; 2],
+            offset_map: vec![[0.0; N_RESIDUALS]; 2],
             ..Default::default()
         };
         let e = c.validate(&at).unwrap_err().to_string();
@@ -456,7 +482,7 @@ mod tests {
         );
         let c = TurboMonitorConfig {
             offset_map_load: vec![0.3, 0.5],
-            offset_map: vec![[0.0; 3]],
+            offset_map: vec![[0.0; N_RESIDUALS]],
             ..Default::default()
         };
         let e = c.validate(&at).unwrap_err().to_string();
@@ -466,14 +492,14 @@ mod tests {
         );
         let c = TurboMonitorConfig {
             offset_map_load: vec![0.3, 0.5],
-            offset_map: vec![[0.0; 3]; 2],
-            scale_map: vec![[0.01; 3], [0.01, 0.0, 0.01]],
+            offset_map: vec![[0.0; N_RESIDUALS]; 2],
+            scale_map: vec![[0.01; N_RESIDUALS], [0.01, 0.0, 0.01, 0.01]],
             ..Default::default()
         };
         let e = c.validate(&at).unwrap_err().to_string();
         assert!(e.contains("scale_map[1][1]"), "{e}");
         let c = TurboMonitorConfig {
-            scale_map: vec![[0.01; 3], [0.01; 3]],
+            scale_map: vec![[0.01; N_RESIDUALS]; 2],
             ..c
         };
         c.validate(&at).expect("a valid map");

@@ -138,6 +138,22 @@ impl Compressor {
     }
 
     /// Efficiency at flow parameter `phi`.
+    /// The head parameter at which the wheel passes the flow parameter `phi` (-): the inverse of
+    /// [`Self::phi`], which falls strictly with `psi` for `psi > 0` and rises with `|psi|`
+    /// below (the windmilling continuation, `phi > phi_max`), so each `phi > -phi_max` has
+    /// one `psi` on the branch the model uses (the negative one above `phi_max`).
+    pub fn psi_from_phi(&self, phi: f64) -> f64 {
+        if phi > self.phi_max {
+            let q = phi / self.phi_max;
+            -self.psi_max * (q * q - 1.0).sqrt()
+        } else if phi >= self.phi_lin {
+            let q = phi / self.phi_max;
+            self.psi_max * (1.0 - q * q).max(0.0).sqrt()
+        } else {
+            self.psi_lin + (phi - self.phi_lin) / self.slope
+        }
+    }
+
     #[inline]
     pub fn efficiency<S: Scalar>(&self, phi: S) -> S {
         let q = (phi - self.phi_opt) / self.phi_opt;
@@ -198,6 +214,11 @@ mod tests {
         assert!(c.phi(1.1 * c.psi_max) < 0.0);
         assert_eq!(c.phi(100.0), -c.phi_max);
         assert!((c.efficiency(0.06) - 0.8).abs() < 1e-15);
+        // The inverse, on every branch.
+        for psi in [-3.0, -0.5, 0.0, 0.5, 2.0, c.psi_lin, 2.25, 2.4] {
+            let back = c.psi_from_phi(c.phi(psi));
+            assert!((back - psi).abs() < 1e-9, "{psi} -> {back}");
+        }
         assert_eq!(c.efficiency(0.0), 0.3);
     }
 

@@ -97,6 +97,7 @@ pub mod params;
 pub mod residuals;
 pub mod restriction;
 pub mod shaft;
+pub mod shaft_balance;
 pub mod stationary;
 pub mod throttle;
 pub mod turbine;
