@@ -9,7 +9,9 @@
 //!    plus its learned offset, as the monitor reports them) is taken; each log's mean is
 //!    removed (what the learned offset takes up: engine to engine and drive to drive), and
 //!    what is left is averaged at the map's nodes along the load `p_im / p_amb` with
-//!    triangular weights; the mean over the logs is added back. A node with less than
+//!    triangular weights; the mean over the logs is added back. The boost residual
+//!    may be absent from the logs (see `OPTIONAL`): its test is then switched off
+//!    (`shaft_test = false`); any other residual without data is an error. A node with less than
 //!    [`MIN_NODE_S`] of weight takes its neighbour's value (the map is flat beyond the data).
 //! 2. **Scales and offset range.** With the map: each residual's scale is the standard
 //!    deviation of its tested deviations (overall, and per node with the same weights:
@@ -64,11 +66,12 @@ pub const THRESHOLD_FLOOR: f64 = 10.0;
 pub const MIN_BLOCKS: usize = 100;
 /// The `[monitor]` key of each residual's threshold (one array).
 const THRESHOLD_KEY: &str = "cusum_threshold";
-/// Residuals the logs may leave untested: the shaft's balance needs boost, which a city cycle
-/// on a large engine may never reach. Its test is then switched off in the file written
-/// (`shaft_test = false`) rather than run on scales nothing calibrated; the others are needed.
+/// Residuals the logs may leave untested: the boost residual has no value where the model's
+/// exhaust side cannot pass the logged flow (a parameter set far from the engine). Its test is
+/// then switched off in the file written (`shaft_test = false`) rather than run on scales
+/// nothing calibrated; the others are needed.
 const OPTIONAL: [bool; N] = [false, false, false, true];
-/// The `[monitor]` key that switches the shaft's test.
+/// The `[monitor]` key that switches the boost residual.
 const SHAFT_KEY: &str = "shaft_test";
 
 /// The result: the map, scales and thresholds, and the configuration texts to write.
@@ -742,7 +745,7 @@ impl TurboCalibration {
         for t in self.tests.iter().filter(|t| !t.active) {
             let _ = writeln!(
                 s,
-                "{:<24} off: the logs never reached it (no boost above boost_ratio_min; shaft_test = false)",
+                "{:<24} off: never tested in the logs (shaft_test = false)",
                 t.test
             );
         }
