@@ -29,13 +29,15 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Simulate a throttle or intake scenario (truth, sensors, injected fault) and write it as
-    /// an MCAP log, with the settings of the committed fixtures (same scenario, same bytes).
+    /// Simulate a throttle, intake or turbo scenario (truth, sensors, injected fault) and write
+    /// it as an MCAP log, with the settings of the committed fixtures (same scenario, same
+    /// bytes).
     Simulate {
         /// Scenario: a path to a scenario TOML file, relative to the working directory (its
-        /// `monitor` key says throttle or intake; `.toml` may be left off), or the name of a
+        /// `monitor` key says throttle, intake or turbo; `.toml` may be left off), the name of a
         /// scenario bundled in fdd (`--list` shows them: e.g. `throttle_tps_stuck`,
-        /// `intake_leak`).
+        /// `intake_leak`), or, for turbo scenarios, a directory of them or a generated set
+        /// (`turbo_tuning`, `turbo_heldout`; `-o` is then a directory).
         #[arg(required_unless_present = "list")]
         scenario: Option<String>,
         /// Output MCAP file.

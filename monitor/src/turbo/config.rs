@@ -106,6 +106,14 @@ pub struct TurboMonitorConfig {
     /// turns it off when the fault-free logs leave it untested, so that no test runs on a
     /// scale nothing calibrated.
     pub shaft_test: bool,
+    /// How far the wastegate's effective opening may be from its command on a healthy engine
+    /// (fraction of travel, 0..0.5): linkage and actuator tolerance, and the exhaust side's
+    /// spread from engine to engine, which a boost controller absorbs by moving the
+    /// wastegate. Where the wastegate has authority (high exhaust flow, nearly closed) a small
+    /// opening moves the boost by tenths of an atmosphere, so the boost residual's scale is
+    /// widened by the boost this tolerance moves at the frame (`hypot(scale, spread)`), and its
+    /// offset learns only where that spread is within the scale. 0: not widened.
+    pub wastegate_tolerance: f64,
     /// Time constant of the learned residual offsets (s).
     pub adapt_tau_s: f64,
     /// Each offset learns alone (at `adapt_tau_s`) for this much of its residual's tested
@@ -187,6 +195,7 @@ impl Default for TurboMonitorConfig {
             offset_map: Vec::new(),
             scale_map: Vec::new(),
             shaft_test: true,
+            wastegate_tolerance: 0.05,
             adapt_tau_s: 5.0,
             adapt_min_s: 15.0,
             adapt_limit: 0.1,
@@ -229,6 +238,7 @@ const ADAPT_MIN: Range = Range::closed(0.0, 3600.0, "s");
 const ADAPT_LIMIT: Range = Range::closed(0.0, 1.0, "");
 const SCALE: Range = Range::above(0.0, 10.0, "");
 const PROBABILITY: Range = Range::closed(0.0, 1.0, "");
+const WG_TOLERANCE: Range = Range::closed(0.0, 0.5, "");
 const HEAL: Range = Range::closed(0.1, 3600.0, "s");
 const WINDOW: Range = Range::closed(0.0, 60.0, "s");
 
@@ -268,6 +278,8 @@ impl TurboMonitorConfig {
             .check(self.steady_pressure_max, STEADY)?;
         at.key("steady_temperature_max_k")
             .check(self.steady_temperature_max_k, STEADY_T)?;
+        at.key("wastegate_tolerance")
+            .check(self.wastegate_tolerance, WG_TOLERANCE)?;
         for (i, &x) in self.offset_map_load.iter().enumerate() {
             let k = at.key("offset_map_load").index(i);
             k.check(x, LOAD)?;

@@ -58,7 +58,13 @@
 //! # Tests and decisions
 //!
 //! `z = (relative residual - map - offset) / scale`, the scale from `scale_map` at the load
-//! (else `residual_scale`): a two-sided CUSUM per residual with reference
+//! (else `residual_scale`; the boost's widened by how much its prediction moves with the
+//! wastegate `wastegate_tolerance` off its command, `hypot(scale, spread)`: where the
+//! wastegate has authority, nearly closed at high exhaust flow, the exhaust side's spread from
+//! engine to engine moves the boost by tenths of an atmosphere, which the boost controller
+//! absorbs by moving the wastegate; the boost offset learns only where that spread is below
+//! [`BOOST_LEARN_SPREAD`] scales, so that an offset learned under boost is not carried to part
+//! load): a two-sided CUSUM per residual with reference
 //! `max(cusum_min_bias_sigma / 2, min_shift / (2 scale))` (deviations below half the smallest
 //! fault the tests are built for, or below the model's own spread at that load, do not
 //! accumulate) and threshold `cusum_threshold` (reported every frame on `/fdd/tests` as
@@ -112,6 +118,9 @@ pub const UNTESTED_SIGMA: f64 = 1e3;
 /// A boost deviation within this many scales of what the wastegate's range (closed to fully
 /// open) can make is one a wastegate fault explains.
 pub const WASTEGATE_BAND: f64 = 2.0;
+/// The boost residual's offset learns only where the wastegate's tolerance moves the boost
+/// prediction by at most this many scales.
+pub const BOOST_LEARN_SPREAD: f64 = 0.25;
 /// How much slower the offsets learn after the start phase.
 pub const TRACK_SLOWDOWN: f64 = 10.0;
 
@@ -476,6 +485,27 @@ impl TurboMonitor {
         };
         let (p_ic_model, omega) =
             shaft.map_or((f64::NAN, f64::NAN), |s| (s.p_ic_pa, s.omega_t_rad_s));
+        // How much the boost prediction moves with the wastegate `wastegate_tolerance` away
+        // from its command (toward closed, or open where it is nearly closed), in ambient
+        // pressures: the prediction's spread where the wastegate has authority.
+        let boost_spread = match shaft {
+            Some(_) if self.cfg.wastegate_tolerance > 0.0 => {
+                let d = self.cfg.wastegate_tolerance;
+                let w = if u.wastegate_frac >= d {
+                    u.wastegate_frac - d
+                } else {
+                    u.wastegate_frac + d
+                };
+                let v = TurboInput {
+                    wastegate_frac: w,
+                    ..*u
+                };
+                shaft_balance(&self.model, r, &v).map_or(f64::INFINITY, |s| {
+                    (s.p_ic_pa - p_ic_model).abs() / u.ambient_pressure_pa
+                })
+            }
+            _ => 0.0,
+        };
         self.estimates = [b.w_cyl_kg_s, b.w_thr_kg_s, p_ic_model, omega];
         let now = [
             b.residuals[R_CYL],
@@ -550,11 +580,17 @@ impl TurboMonitor {
         let steady_r = [steady, steady && pressures, steady && pressures, filled];
         let load = f.p_im / u.ambient_pressure_pa;
         let base = map_offset(&self.cfg.offset_map_load, &self.cfg.offset_map, load);
-        let scale = if self.cfg.scale_map.is_empty() {
+        let mut scale = if self.cfg.scale_map.is_empty() {
             self.cfg.residual_scale
         } else {
             map_offset(&self.cfg.offset_map_load, &self.cfg.scale_map, load)
         };
+        // The boost's offset learns only where the wastegate has next to no authority (its
+        // tolerance moves the prediction by less than [`BOOST_LEARN_SPREAD`] scales: an offset
+        // learned under boost would carry the model's error at that load to every other);
+        // its scale is widened by that movement.
+        let boost_conditioned = boost_spread <= BOOST_LEARN_SPREAD * scale[R_BOOST];
+        scale[R_BOOST] = scale[R_BOOST].hypot(boost_spread);
         let mut rel = [0.0; N_RESIDUALS];
         rel[R_CYL] = (f.raw[R_CYL] - fill_im - fill_ic) / reference - base[R_CYL];
         rel[R_THR] = (f.raw[R_THR] - fill_ic) / reference - base[R_THR];
@@ -581,9 +617,12 @@ impl TurboMonitor {
         {
             let step = dt.min(self.cfg.max_frame_gap_s);
             let lim = self.cfg.adapt_limit;
-            for i in
-                (0..N_RESIDUALS).filter(|&i| steady_r[i] && settled[i] && (learning[i] || quiet))
-            {
+            for i in (0..N_RESIDUALS).filter(|&i| {
+                steady_r[i]
+                    && settled[i]
+                    && (learning[i] || quiet)
+                    && (i != R_BOOST || boost_conditioned)
+            }) {
                 let tau_a = if learning[i] {
                     self.learned_s[i] += step;
                     self.cfg.adapt_tau_s
