@@ -134,15 +134,10 @@ fn turbo_calibration_writes_maps_that_calibrate_to_themselves_and_refuses_a_faul
     assert!(err.contains("f.mcap") && err.contains("waf_gain"), "{err}");
 }
 
-/// The LiU-ICE monitor file: `fdd calibrate` on the two fault-free calibration logs writes the
-/// committed `config/turbo_monitor.toml` byte for byte (so its thresholds, scales and map are
-/// the command's, from fault-free data only), and the third fault-free log, which it was not
-/// calibrated on, raises no DTC.
-#[test]
-fn liu_ice_monitor_file_is_what_calibrate_writes_from_the_fault_free_logs() {
+/// A temporary directory with config/fdd.toml, the air-path monitor switched on with the
+/// committed LiU-ICE monitor file (and its parameter file) beside it; the config's path.
+fn liu_config() -> (tempfile::TempDir, PathBuf) {
     let dir = tempfile::tempdir().expect("temp dir");
-    // config/fdd.toml with the air-path monitor on and the committed monitor file (and its
-    // parameter file) beside it.
     let base = std::fs::read_to_string(root().join("config/fdd.toml")).expect("fdd.toml");
     assert!(
         base.contains("\nturbo = false\n"),
@@ -160,6 +155,25 @@ fn liu_ice_monitor_file_is_what_calibrate_writes_from_the_fault_free_logs() {
     for f in ["turbo_monitor.toml", "turbo_liu_ice.toml"] {
         std::fs::copy(root().join("config").join(f), dir.path().join(f)).expect("copy");
     }
+    (dir, cfg)
+}
+
+/// The "DTCs raised" section of a replay report (not the whole report: it names the random
+/// temp dir, which may spell a DTC).
+fn dtc_section(report: &str) -> &str {
+    report
+        .split("\nDTCs raised (testFailed 0 -> 1)\n")
+        .nth(1)
+        .expect("the report has its DTC section")
+}
+
+/// The LiU-ICE monitor file: `fdd calibrate` on the two fault-free calibration logs writes the
+/// committed `config/turbo_monitor.toml` byte for byte (so its thresholds, scales and map are
+/// the command's, from fault-free data only), and the third fault-free log, which it was not
+/// calibrated on, raises no DTC.
+#[test]
+fn liu_ice_monitor_file_is_what_calibrate_writes_from_the_fault_free_logs() {
+    let (dir, cfg) = liu_config();
     let liu = root().join("fixtures/data/real/liu-ice");
     let a = liu.join("ftp75city2_NF_0-100s.mcap");
     let b = liu.join("ftp75city2_NF_140-260s.mcap");
@@ -195,13 +209,43 @@ fn liu_ice_monitor_file_is_what_calibrate_writes_from_the_fault_free_logs() {
         judged.as_os_str(),
     ]);
     assert!(report.contains("turbo ("), "{report}");
-    // The section itself, not the whole report: the report names the (random) temp dir.
-    let raised = report
-        .split("\nDTCs raised (testFailed 0 -> 1)\n")
-        .nth(1)
-        .expect("the report has its DTC section");
     assert!(
-        raised.starts_with("  none\n"),
+        dtc_section(&report).starts_with("  none\n"),
         "a DTC on fault-free driving:\n{report}"
     );
+}
+
+/// The LiU-ICE boost-sensor windows (the real engine's p_ic reading 0.85 and 1.15 times the
+/// true pressure from the onset in `ftp75city2_fault_time.txt`): with the committed monitor
+/// file the boost sensor's own DTC P0236-62 is raised after the onset. The flow balances
+/// alone confuse a boost-sensor gain with the throttle's area where the throttle is choked;
+/// the boost residual, which the sensor moves and the throttle does not, names it.
+#[test]
+fn liu_ice_boost_sensor_windows_raise_the_boost_sensors_dtc_after_the_onset() {
+    let (_dir, cfg) = liu_config();
+    let liu = root().join("fixtures/data/real/liu-ice");
+    let times = std::fs::read_to_string(liu.join("ftp75city2_fault_time.txt")).expect("times");
+    for name in ["ftp75city2_f_pic_085", "ftp75city2_f_pic_115"] {
+        let onset: f64 = times
+            .lines()
+            .find_map(|l| l.strip_prefix(name)?.trim().parse().ok())
+            .unwrap_or_else(|| panic!("{name}: no onset"));
+        let log = liu.join(format!("{name}_window.mcap"));
+        let report = ok(&[
+            "replay".as_ref(),
+            "--no-progress".as_ref(),
+            "--config".as_ref(),
+            cfg.as_os_str(),
+            log.as_os_str(),
+        ]);
+        let at: f64 = dtc_section(&report)
+            .lines()
+            .find(|l| l.trim_start().starts_with("P0236-62"))
+            .and_then(|l| l.split_whitespace().nth(2)?.parse().ok())
+            .unwrap_or_else(|| panic!("{name}: no P0236-62:\n{report}"));
+        assert!(
+            at >= onset && at <= onset + 10.0,
+            "{name}: P0236-62 at {at} s, onset {onset} s"
+        );
+    }
 }

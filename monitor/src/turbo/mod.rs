@@ -76,8 +76,13 @@
 //! the bank fits each single-fault hypothesis (a gain on `p_ic`, `p_im` or the MAF, a bias on
 //! `T_ic`, a leak before or after the throttle, the throttle's area) and the best is named when
 //! its probability among them is at least `isolation_min_probability`; otherwise the group DTC
-//! carries the three best as candidates. A leak before and a leak after the throttle share the
-//! leak DTC (the candidates say which). When the boost test alarmed alone (the intake CUSUMs
+//! carries the three best as candidates. The boost residual, which the bank does not fit,
+//! checks a boost-sensor decision (a fitted gain that would have moved it clearly while it
+//! stayed in its band: the group) and breaks a tie in the boost sensor's favour when the bank
+//! is unsure between it, the MAF and the throttle (which do not enter the boost prediction)
+//! and the boost residual moved as the fitted gain would ([`BOOST_EVIDENCE_SCALES`], [`BOOST_EVIDENCE_RATIO`]; where the
+//! throttle is choked its balance cannot tell a boost-sensor gain from the throttle's area).
+//! A leak before and a leak after the throttle share the leak DTC (the candidates say which). When the boost test alarmed alone (the intake CUSUMs
 //! each below half their thresholds), the wastegate is named (underboost P0299 for a boost
 //! below the prediction, overboost P0234 above) if some wastegate position, closed to fully
 //! open, explains most of the episode's boost deviations ([`WASTEGATE_BAND`]); otherwise the
@@ -91,7 +96,7 @@ pub mod config;
 
 use fdd_diagnostics::{TestResult, Verdict};
 use fdd_estimators::models::turbo::isolation::{
-    Hypothesis, IsolationBank, IsolationConfig, IsolationFrame,
+    Fit, Hypothesis, IsolationBank, IsolationConfig, IsolationFrame,
 };
 use fdd_estimators::models::turbo::residuals::{
     flow_balance, ExhaustPressure, IntakeReadings, R_CYL, R_TC, R_THR,
@@ -276,6 +281,59 @@ pub fn map_offset<const N: usize>(nodes: &[f64], values: &[[f64; N]], load: f64)
     std::array::from_fn(|i| values[k - 1][i] + w * (values[k][i] - values[k - 1][i]))
 }
 
+/// The boost residual over an episode's frames, for the decision between the boost sensor and
+/// the faults the bank fits from the flow balances.
+#[derive(Debug, Clone, Copy, Default)]
+struct BoostEvidence {
+    dev: f64,
+    scale: f64,
+    reading: f64,
+    n: u32,
+}
+
+/// Fewest frames of the boost residual for its evidence to count.
+pub const BOOST_EVIDENCE_MIN_FRAMES: u32 = 20;
+/// The boost residual's mean deviation "clearly off" (or clearly not): this many of its mean
+/// scales (over the mean's own spread, the scale is a frame's).
+pub const BOOST_EVIDENCE_SCALES: f64 = 1.5;
+/// How far the boost residual's mean deviation may be from what the fitted boost-sensor gain
+/// gives and still be its (a factor either way: the fitted gain and the learned offset are
+/// both a few percent off).
+pub const BOOST_EVIDENCE_RATIO: f64 = 2.5;
+
+impl BoostEvidence {
+    fn add(&mut self, dev: f64, scale: f64, reading: f64) {
+        self.dev += dev;
+        self.scale += scale;
+        self.reading += reading;
+        self.n += 1;
+    }
+
+    /// With a boost-sensor gain `gain` fitted by the bank: `Some(true)` when the boost
+    /// residual's mean deviation is clearly off and within [`BOOST_EVIDENCE_RATIO`] of what
+    /// that gain gives (`(1 - 1/gain)` times the mean reading, same sign), `Some(false)` when
+    /// that gain would move it clearly but it stays within the band, `None` without enough
+    /// frames or a verdict.
+    fn favours_p_ic(&self, gain: f64) -> Option<bool> {
+        if self.n < BOOST_EVIDENCE_MIN_FRAMES || !(gain > 0.0) {
+            return None;
+        }
+        let n = f64::from(self.n);
+        let (dev, scale, reading) = (self.dev / n, self.scale / n, self.reading / n);
+        let expected = (1.0 - 1.0 / gain) * reading;
+        let band = BOOST_EVIDENCE_SCALES * scale;
+        let ratio = dev / expected;
+        if dev.abs() >= band && (1.0 / BOOST_EVIDENCE_RATIO..=BOOST_EVIDENCE_RATIO).contains(&ratio)
+        {
+            Some(true)
+        } else if expected.abs() >= 2.0 * band && dev.abs() < band {
+            Some(false)
+        } else {
+            None
+        }
+    }
+}
+
 /// The air-path monitor (see the module docs). No heap allocation per frame.
 #[derive(Debug)]
 pub struct TurboMonitor {
@@ -311,6 +369,10 @@ pub struct TurboMonitor {
     /// what some wastegate position could make, and those in which it was not (see
     /// [`WASTEGATE_BAND`]).
     wastegate_frames: [u32; 2],
+    /// The boost residual over the bank's frames (since the CUSUMs were last all zero) where
+    /// it was tested: sums of its deviation and scale (ambient pressures) and of the boost
+    /// reading over the ambient pressure, and their number (see [`BoostEvidence`]).
+    boost_evidence: BoostEvidence,
     bank: IsolationBank,
     ev_result: [TestResult; EVENTS],
     ev_cands: [[(&'static str, f64); 3]; EVENTS],
@@ -390,6 +452,7 @@ impl TurboMonitor {
             episode_start_s: None,
             episode_result: TestResult::NOT_TESTED,
             wastegate_frames: [0; 2],
+            boost_evidence: BoostEvidence::default(),
             bank,
             ev_result: [TestResult::NOT_TESTED; EVENTS],
             ev_cands: [[("", 0.0); 3]; EVENTS],
@@ -417,6 +480,7 @@ impl TurboMonitor {
         self.healthy_s = 0.0;
         self.bank.reset();
         self.wastegate_frames = [0; 2];
+        self.boost_evidence = BoostEvidence::default();
         self.cusum = [Cusum::default(); N_RESIDUALS];
         self.alarmed = [0; N_RESIDUALS];
         self.episode_start_s = None;
@@ -693,7 +757,15 @@ impl TurboMonitor {
         };
         if self.episode_start_s.is_none() && self.cusum.iter().all(|c| c.value() == 0.0) {
             self.bank.reset();
+            self.boost_evidence = BoostEvidence::default();
         } else if tested[R_CYL] {
+            if tested[R_BOOST] {
+                self.boost_evidence.add(
+                    z[R_BOOST] * scale[R_BOOST],
+                    scale[R_BOOST],
+                    r.p_ic_pa / u.ambient_pressure_pa,
+                );
+            }
             let frame = IsolationFrame {
                 readings: *r,
                 input: *u,
@@ -862,7 +934,42 @@ impl TurboMonitor {
                 self.scores[i] += f.probability;
             }
         }
-        let best = fits[0];
+        let mut best = fits[0];
+        // The boost residual, which the bank does not fit, checks a boost-sensor decision and
+        // breaks a tie in its favour: a boost-sensor gain g moves it by (1 - 1/g) times the
+        // reading, while the MAF and the throttle, which the bank confuses with the boost
+        // sensor where the throttle is choked, do not enter the boost prediction at all (the
+        // manifold-pressure gain, a charge-air temperature bias and the leaks do: no tie is
+        // broken against them). See [`BoostEvidence::favours_p_ic`].
+        let p_ic = fits
+            .iter()
+            .take(3)
+            .find(|f| f.hypothesis == Hypothesis::PIcGain);
+        let unsure = best.probability < self.cfg.isolation_min_probability;
+        let boost_blind = matches!(
+            best.hypothesis,
+            Hypothesis::PIcGain | Hypothesis::MafGain | Hypothesis::ThrottleArea
+        );
+        if let Some(&f) = p_ic {
+            match self.boost_evidence.favours_p_ic(f.size) {
+                Some(true) if unsure && boost_blind => {
+                    // Named on the boost residual's word: a stated score of 1.
+                    best = Fit {
+                        probability: 1.0,
+                        ..f
+                    };
+                    self.scores = [0.0; FAULT_CLASSES.len()];
+                    if let Some(i) = FAULT_CLASSES.iter().position(|c| *c == "turbo_p_ic_sensor") {
+                        self.scores[i] = 1.0;
+                    }
+                }
+                Some(false) if best.hypothesis == Hypothesis::PIcGain && !unsure => {
+                    // The boost did not move as that gain would move it: the group.
+                    best.probability = 0.0;
+                }
+                _ => {}
+            }
+        }
         if self.bank.frames() > 0 && best.probability >= self.cfg.isolation_min_probability {
             let (event, class) = hypothesis_event(best.hypothesis);
             self.ev_result[event] = result;
@@ -1012,6 +1119,39 @@ mod tests {
         }
         // Exactly at an inner node: its row.
         assert_eq!(map_offset(&nodes, &rows, 0.5), rows[1]);
+    }
+
+    /// `n` frames of a boost deviation `dev` at scale `scale` and a reading of `reading`
+    /// ambient pressures.
+    fn evidence(n: u32, dev: f64, scale: f64, reading: f64) -> BoostEvidence {
+        let mut e = BoostEvidence::default();
+        for _ in 0..n {
+            e.add(dev, scale, reading);
+        }
+        e
+    }
+
+    #[test]
+    fn the_boost_evidence_says_whether_a_boost_sensor_gain_moved_the_boost() {
+        // A 10 % gain at a reading of 1.1 atm moves the boost residual by 0.1 atm.
+        let moved = evidence(40, 0.1, 0.015, 1.1);
+        assert_eq!(moved.favours_p_ic(1.10), Some(true));
+        // ... not by what a gain below 1 would (the other sign), nor by four times less.
+        assert_eq!(moved.favours_p_ic(0.90), None);
+        assert_eq!(moved.favours_p_ic(1.02), None);
+        // A boost that stayed within its band while the fitted gain would move it clearly
+        // out: not the boost sensor.
+        let still = evidence(40, 0.005, 0.015, 1.1);
+        assert_eq!(still.favours_p_ic(1.10), Some(false));
+        // Within the band and a gain too small to say: no word either way.
+        assert_eq!(still.favours_p_ic(1.01), None);
+        // Too few frames, or a gain that is no gain: no word.
+        assert_eq!(
+            evidence(BOOST_EVIDENCE_MIN_FRAMES - 1, 0.1, 0.015, 1.1).favours_p_ic(1.1),
+            None
+        );
+        assert_eq!(moved.favours_p_ic(0.0), None);
+        assert_eq!(moved.favours_p_ic(f64::NAN), None);
     }
 
     #[test]
