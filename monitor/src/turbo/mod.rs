@@ -80,9 +80,11 @@
 //! checks a boost-sensor decision (a fitted gain that would have moved it clearly while it
 //! stayed in its band: the group) and breaks a tie in the boost sensor's favour when the bank
 //! is unsure between it, the MAF and the throttle (which do not enter the boost prediction)
-//! and the boost residual moved as the fitted gain would ([`BOOST_EVIDENCE_SCALES`], [`BOOST_EVIDENCE_RATIO`]; where the
-//! throttle is choked its balance cannot tell a boost-sensor gain from the throttle's area).
-//! A leak before and a leak after the throttle share the leak DTC (the candidates say which). When the boost test alarmed alone (the intake CUSUMs
+//! and the boost residual moved as the fitted gain would ([`BOOST_EVIDENCE_SCALES`],
+//! [`BOOST_EVIDENCE_RATIO`]; where the throttle is choked its balance cannot tell a
+//! boost-sensor gain from the throttle's area). A leak before and a leak after the throttle
+//! share the leak DTC (the candidates say which). When the boost test alarmed alone (the
+//! intake CUSUMs
 //! each below half their thresholds), the wastegate is named (underboost P0299 for a boost
 //! below the prediction, overboost P0234 above) if some wastegate position, closed to fully
 //! open, explains most of the episode's boost deviations ([`WASTEGATE_BAND`]); otherwise the
@@ -641,7 +643,14 @@ impl TurboMonitor {
         let eps = self.cfg.steady_pressure_max;
         let pressures = (f.p_im_fast - f.p_im).abs() <= eps * f.p_im
             && (f.p_ic_fast - f.p_ic).abs() <= eps * f.p_ic;
-        let steady_r = [steady, steady && pressures, steady && pressures, filled];
+        // The boost also needs its spread (the balance at the tolerance's other position may
+        // find no root: then nothing says how far to trust the prediction).
+        let steady_r = [
+            steady,
+            steady && pressures,
+            steady && pressures,
+            filled && boost_spread.is_finite(),
+        ];
         let load = f.p_im / u.ambient_pressure_pa;
         let base = map_offset(&self.cfg.offset_map_load, &self.cfg.offset_map, load);
         let mut scale = if self.cfg.scale_map.is_empty() {
