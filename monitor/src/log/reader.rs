@@ -1239,6 +1239,10 @@ impl LogReader {
         // 240 MB). No record of this chunk can be longer than the chunk record itself or its
         // declared uncompressed size (already within the decompression budget), so that bounds
         // every allocation for this chunk.
+        if let Some(why) = uncompressed_record_overrun(&body[..n]) {
+            self.chunk_buf = body;
+            return Err(self.bad_chunk(rec_pos, why));
+        }
         let declared = declared.and_then(|d| usize::try_from(d).ok()).unwrap_or(0);
         let chunk_limit = limit.min(n.max(declared));
         let mut lr = LinearReader::new_with_options(LinearReaderOptions {
@@ -2066,6 +2070,83 @@ fn zstd_window_too_large(frame: &[u8]) -> bool {
             base + (base / 8) * u64::from(wd & 7) > MAX_WINDOW
         }
         _ => false,
+    }
+}
+
+/// In an uncompressed chunk (`body`: the chunk record's body), a record whose declared length
+/// runs past the chunk's records section: described, else `None`. The mcap crate's chunk
+/// reader subtracts such a record's length from what is left of the section without a check
+/// (an integer overflow: a panic in a debug build, found replaying the `mcap_reader` fuzz
+/// corpus), so the chunk is refused before it gets there. Compressed chunks are bounded by
+/// the decompressor's sizes.
+fn uncompressed_record_overrun(body: &[u8]) -> Option<String> {
+    let mut c = Cur::new(body);
+    c.u64()?;
+    c.u64()?;
+    c.u64()?;
+    c.u32()?;
+    if !c.string()?.is_empty() {
+        return None;
+    }
+    let declared = c.u64()?;
+    let records = c.b;
+    let mut left = declared.min(records.len() as u64);
+    let mut at = 0usize;
+    while left >= RECORD_HEADER {
+        let len = Cur::new(records.get(at + 1..at + 9)?).u64()?;
+        if len > left - RECORD_HEADER {
+            return Some(format!(
+                "a record at byte {at} of the chunk's records declares {len} bytes, more than the {} left in them",
+                left - RECORD_HEADER
+            ));
+        }
+        left -= RECORD_HEADER + len;
+        at += usize::try_from(RECORD_HEADER + len).ok()?;
+    }
+    None
+}
+
+#[cfg(test)]
+mod overrun_tests {
+    use super::uncompressed_record_overrun;
+
+    /// A chunk body: no compression (or `compression`), `records_len` declared, `records`.
+    fn chunk(compression: &str, records_len: u64, records: &[u8]) -> Vec<u8> {
+        let mut b = vec![0u8; 28];
+        b.extend_from_slice(&(compression.len() as u32).to_le_bytes());
+        b.extend_from_slice(compression.as_bytes());
+        b.extend_from_slice(&records_len.to_le_bytes());
+        b.extend_from_slice(records);
+        b
+    }
+
+    fn record(opcode: u8, len: u64, body: &[u8]) -> Vec<u8> {
+        let mut r = vec![opcode];
+        r.extend_from_slice(&len.to_le_bytes());
+        r.extend_from_slice(body);
+        r
+    }
+
+    #[test]
+    fn a_record_longer_than_the_records_left_is_found() {
+        let two = [record(5, 3, b"abc"), record(5, 2, b"de")].concat();
+        assert_eq!(
+            uncompressed_record_overrun(&chunk("", two.len() as u64, &two)),
+            None
+        );
+        // The section declared shorter than its records (the bytes are there): the second
+        // record runs past it.
+        let e = uncompressed_record_overrun(&chunk("", 22, &two)).expect("found");
+        assert!(
+            e.contains("byte 12") && e.contains("declares 2 bytes") && e.contains("the 1 left"),
+            "{e}"
+        );
+        // A length near u64::MAX does not wrap.
+        let huge = record(5, u64::MAX - 3, b"abc");
+        assert!(uncompressed_record_overrun(&chunk("", huge.len() as u64, &huge)).is_some());
+        // Compressed chunks and bodies too short to hold a header are left to the decoders.
+        assert_eq!(uncompressed_record_overrun(&chunk("zstd", 22, &two)), None);
+        assert_eq!(uncompressed_record_overrun(&[0u8; 10]), None);
     }
 }
 
