@@ -551,27 +551,6 @@ impl TurboMonitor {
         };
         let (p_ic_model, omega) =
             shaft.map_or((f64::NAN, f64::NAN), |s| (s.p_ic_pa, s.omega_t_rad_s));
-        // How much the boost prediction moves with the wastegate `wastegate_tolerance` away
-        // from its command (toward closed, or open where it is nearly closed), in ambient
-        // pressures: the prediction's spread where the wastegate has authority.
-        let boost_spread = match shaft {
-            Some(_) if self.cfg.wastegate_tolerance > 0.0 => {
-                let d = self.cfg.wastegate_tolerance;
-                let w = if u.wastegate_frac >= d {
-                    u.wastegate_frac - d
-                } else {
-                    u.wastegate_frac + d
-                };
-                let v = TurboInput {
-                    wastegate_frac: w,
-                    ..*u
-                };
-                shaft_balance(&self.model, r, &v).map_or(f64::INFINITY, |s| {
-                    (s.p_ic_pa - p_ic_model).abs() / u.ambient_pressure_pa
-                })
-            }
-            _ => 0.0,
-        };
         self.estimates = [b.w_cyl_kg_s, b.w_thr_kg_s, p_ic_model, omega];
         let now = [
             b.residuals[R_CYL],
@@ -643,6 +622,28 @@ impl TurboMonitor {
         let eps = self.cfg.steady_pressure_max;
         let pressures = (f.p_im_fast - f.p_im).abs() <= eps * f.p_im
             && (f.p_ic_fast - f.p_ic).abs() <= eps * f.p_ic;
+        // How much the boost prediction moves with the wastegate `wastegate_tolerance` away
+        // from its command (toward closed, or open where it is nearly closed), in ambient
+        // pressures: the prediction's spread where the wastegate has authority. Only in a frame
+        // whose boost can be tested (`filled`): elsewhere nothing uses it.
+        let boost_spread = match shaft {
+            Some(_) if filled && self.cfg.wastegate_tolerance > 0.0 => {
+                let d = self.cfg.wastegate_tolerance;
+                let w = if u.wastegate_frac >= d {
+                    u.wastegate_frac - d
+                } else {
+                    u.wastegate_frac + d
+                };
+                let v = TurboInput {
+                    wastegate_frac: w,
+                    ..*u
+                };
+                shaft_balance(&self.model, r, &v).map_or(f64::INFINITY, |s| {
+                    (s.p_ic_pa - p_ic_model).abs() / u.ambient_pressure_pa
+                })
+            }
+            _ => 0.0,
+        };
         // The boost also needs its spread (the balance at the tolerance's other position may
         // find no root: then nothing says how far to trust the prediction).
         let steady_r = [

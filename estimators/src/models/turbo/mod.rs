@@ -104,6 +104,17 @@ pub mod turbine;
 pub mod volumes;
 pub mod wastegate;
 
+/// The model of a parameter file's `[model]` table (unit tests of the residual modules).
+#[cfg(test)]
+pub(crate) fn model_from_file_text(text: &str) -> TurboModel {
+    #[derive(serde::Deserialize)]
+    struct F {
+        model: TurboParams,
+    }
+    let f: F = toml::from_str(text).expect("parses");
+    TurboModel::new(f.model).expect("valid")
+}
+
 use std::sync::Arc;
 
 use nalgebra::{SMatrix, SVector};

@@ -206,12 +206,7 @@ mod tests {
 
     /// The generic TCSI set.
     fn model() -> TurboModel {
-        #[derive(serde::Deserialize)]
-        struct F {
-            model: crate::models::turbo::TurboParams,
-        }
-        let f: F = toml::from_str(include_str!("../../../../config/turbo.toml")).expect("parses");
-        TurboModel::new(f.model).expect("valid")
+        crate::models::turbo::model_from_file_text(include_str!("../../../../config/turbo.toml"))
     }
 
     fn input(throttle_pct: f64, rpm: f64) -> TurboInput {

@@ -426,13 +426,9 @@ mod tests {
 
     /// The TSFS09 fit (the monitor's model of the simulated logs).
     fn model() -> TurboModel {
-        #[derive(serde::Deserialize)]
-        struct F {
-            model: crate::models::turbo::TurboParams,
-        }
-        let f: F =
-            toml::from_str(include_str!("../../../../config/turbo_tsfs09.toml")).expect("parses");
-        TurboModel::new(f.model).expect("valid")
+        crate::models::turbo::model_from_file_text(include_str!(
+            "../../../../config/turbo_tsfs09.toml"
+        ))
     }
 
     fn input(throttle_pct: f64, rpm: f64, wg: f64) -> TurboInput {
