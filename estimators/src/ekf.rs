@@ -64,6 +64,17 @@ where
         &self.p
     }
 
+    /// The state transition model the filter runs.
+    pub fn transition_model(&self) -> &T {
+        &self.transition
+    }
+
+    /// The state transition model, to change a setting of it (e.g. an assumed road surface)
+    /// between steps; the estimate is kept.
+    pub fn transition_model_mut(&mut self) -> &mut T {
+        &mut self.transition
+    }
+
     /// Replaces the estimate. `p` must be symmetric positive definite and `x` finite; on error
     /// nothing changes.
     pub fn reset(&mut self, x: SVector<f64, N>, p: SMatrix<f64, N, N>) -> Result<(), ConfigError> {
