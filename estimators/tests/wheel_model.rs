@@ -3,8 +3,8 @@
 //! and the filter on a braking stop integrated finely from the continuous model.
 
 use fdd_estimators::models::wheel::{
-    slip, slip_with_slopes, Burckhardt, Friction, QuarterCar, Surface, WheelEkf, WheelFilterParams,
-    WheelParams, X_MASS, X_MU, X_OMEGA, X_SLIP, X_V,
+    slip, slip_with_slopes, Burckhardt, Friction, QuarterCar, Surface, WheelEkf,
+    WheelEstimatorParams, WheelFilterParams, WheelParams, X_MASS, X_MU, X_OMEGA, X_SLIP, X_V,
 };
 use fdd_estimators::{numerical_jacobian, TransitionModel};
 use nalgebra::SVector;
@@ -17,6 +17,7 @@ use serde::Deserialize;
 struct File {
     model: WheelParams,
     filter: WheelFilterParams,
+    estimator: WheelEstimatorParams,
 }
 
 fn config() -> File {
@@ -24,6 +25,7 @@ fn config() -> File {
     let f: File = toml::from_str(text).expect("config/wheel.toml parses");
     f.model.validate().expect("[model] valid");
     f.filter.validate().expect("[filter] valid");
+    f.estimator.validate().expect("[estimator] valid");
     f
 }
 

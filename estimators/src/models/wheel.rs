@@ -244,6 +244,8 @@ pub mod ranges {
     pub const MEASUREMENT_VARIANCE: Range = Range::above(0.0, 1e6, "rad^2/s^2");
     pub const INITIAL_VARIANCE: Range = Range::closed(0.0, 1e6, "");
     pub const ROLLING_SLIP_STD: Range = Range::closed(0.0, 0.5, "");
+    pub const PULL: Range = Range::closed(0.0, 1.0, "");
+    pub const ROLLING_TORQUE_NM: Range = Range::closed(0.0, 1e4, "N m");
 }
 
 impl WheelParams {
@@ -317,6 +319,65 @@ impl WheelFilterParams {
     /// `Q` as a matrix.
     pub fn q(&self) -> SMatrix<f64, 5, 5> {
         SMatrix::from_diagonal(&SVector::from(self.process_noise))
+    }
+}
+
+/// fdd's wheel estimator (the `[estimator]` table of `config/wheel.toml`): the tutorial's
+/// filter with the surface unknown, its friction pulled toward the torque balance
+/// ([`Friction::TorqueBalance`]) and the rolling wheel's zero slip as a pseudo-measurement
+/// while less than `rolling_torque_nm` acts on the wheel.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WheelEstimatorParams {
+    /// Share of the way to the torque balance the friction moves per step (-, 0..1; 0 makes
+    /// it a random walk).
+    pub friction_pull: f64,
+    /// Brake plus drive torque magnitude below which the wheel counts as rolling (N m).
+    pub rolling_torque_nm: f64,
+    /// As [`WheelFilterParams::process_noise`].
+    #[serde(deserialize_with = "exact_array")]
+    pub process_noise: [f64; 5],
+    /// As [`WheelFilterParams::measurement_variance_rad2_s2`].
+    pub measurement_variance_rad2_s2: f64,
+    /// As [`WheelFilterParams::initial_variance`].
+    #[serde(deserialize_with = "exact_array")]
+    pub initial_variance: [f64; 5],
+    /// As [`WheelFilterParams::rolling_slip_std`].
+    pub rolling_slip_std: f64,
+}
+
+impl WheelEstimatorParams {
+    /// Checks every key, relative to the `[estimator]` table.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        ranges::PULL.check("friction_pull", self.friction_pull)?;
+        ranges::ROLLING_TORQUE_NM.check("rolling_torque_nm", self.rolling_torque_nm)?;
+        self.filter().validate()
+    }
+
+    /// The filter's noise settings.
+    pub fn filter(&self) -> WheelFilterParams {
+        WheelFilterParams {
+            process_noise: self.process_noise,
+            measurement_variance_rad2_s2: self.measurement_variance_rad2_s2,
+            initial_variance: self.initial_variance,
+            rolling_slip_std: self.rolling_slip_std,
+        }
+    }
+
+    /// The friction law.
+    pub fn friction(&self) -> Friction {
+        if self.friction_pull > 0.0 {
+            Friction::TorqueBalance {
+                pull: self.friction_pull,
+            }
+        } else {
+            Friction::RandomWalk
+        }
+    }
+
+    /// Whether a wheel with these torques (N m) counts as rolling.
+    pub fn rolling(&self, torques: &SVector<f64, 2>) -> bool {
+        torques[U_BRAKE].abs() + torques[U_DRIVE].abs() < self.rolling_torque_nm
     }
 }
 
