@@ -24,3 +24,4 @@ pub mod staleness;
 pub mod text_file;
 pub mod throttle;
 pub mod turbo;
+pub mod wheel;

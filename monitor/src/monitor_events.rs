@@ -24,14 +24,16 @@ use fdd_diagnostics::{ConfigError, TestResult, Verdict};
 use crate::monitor::{Output, OutputSink};
 use crate::signal_table::{SignalId, SignalTable};
 
-/// One event of a monitor: its name, its DTC (`P0106-64`), its memory priority (1 highest) and
-/// its debounce.
+/// One event of a monitor: its name, its DTC (`P0106-64`), its memory priority (1 highest),
+/// its debounce, and whether it requests the MIL (an information event, e.g. a road surface
+/// class, is stored and reported but never lights the lamp).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EventSpec<'a> {
     pub name: &'a str,
     pub dtc: &'a str,
     pub priority: u8,
     pub debounce: DebounceConfig,
+    pub mil: bool,
 }
 
 impl<'a> EventSpec<'a> {
@@ -42,6 +44,19 @@ impl<'a> EventSpec<'a> {
             dtc,
             priority,
             debounce: DebounceConfig::MonitorInternal,
+            mil: true,
+        }
+    }
+
+    /// An information event qualified by the monitor itself: stored with its status byte and
+    /// freeze frame, never requesting the MIL.
+    pub const fn information(name: &'a str, dtc: &'a str, priority: u8) -> Self {
+        EventSpec {
+            name,
+            dtc,
+            priority,
+            debounce: DebounceConfig::MonitorInternal,
+            mil: false,
         }
     }
 }
@@ -105,6 +120,7 @@ struct OwnedSpec {
     dtc: String,
     priority: u8,
     debounce: DebounceConfig,
+    mil: bool,
 }
 
 impl MonitorEvents {
@@ -126,6 +142,7 @@ impl MonitorEvents {
                 dtc: s.dtc.to_string(),
                 priority: s.priority,
                 debounce: s.debounce,
+                mil: s.mil,
             })
             .collect();
         let n = specs.len();
@@ -165,7 +182,10 @@ impl MonitorEvents {
                 debounce: s.debounce,
                 confirmation_threshold: 2,
                 aging_threshold: 40,
-                mil: MilConfig::default(),
+                mil: MilConfig {
+                    enabled: s.mil,
+                    ..MilConfig::default()
+                },
                 freeze_frame: ff.clone(),
                 freeze_frame_update: Default::default(),
             })

@@ -99,6 +99,7 @@ impl StalenessMonitor {
                 dtc: &s.stale_dtc,
                 priority: cfg.staleness.priority,
                 debounce: cfg.staleness.debounce,
+                mil: true,
             })
             .collect();
         let events = MonitorEvents::with_capacity(&specs, cfg.signals.len().max(1))?;

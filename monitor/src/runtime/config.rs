@@ -108,6 +108,11 @@ pub fn default_truths() -> Vec<TruthConfig> {
             field: "w_ei_kg_s".into(),
             estimate: "cylinder_flow".into(),
         },
+        TruthConfig {
+            topic: "/truth/wheel".into(),
+            field: "value".into(),
+            estimate: "vehicle_reference_speed".into(),
+        },
     ]
 }
 
@@ -224,6 +229,13 @@ pub struct MonitorsConfig {
     /// (the LiU-ICE engine's parameters).
     #[serde(default)]
     pub turbo_config: Option<std::path::PathBuf>,
+    /// The wheel monitor (four quarter-car filters and the wheel-speed sensor checks).
+    #[serde(default)]
+    pub wheel: bool,
+    /// Wheel monitor settings (a `config/wheel_monitor.toml`-shaped file naming its parameter
+    /// file; relative paths as for `throttle_config`); absent: the embedded default.
+    #[serde(default)]
+    pub wheel_config: Option<std::path::PathBuf>,
 }
 
 impl MonitorsConfig {
@@ -238,6 +250,9 @@ impl MonitorsConfig {
         }
         if self.turbo {
             v.push("turbo");
+        }
+        if self.wheel {
+            v.push("wheel");
         }
         v
     }
@@ -348,6 +363,7 @@ impl RuntimeConfig {
                 &mut cfg.monitors.throttle_config,
                 &mut cfg.monitors.intake_config,
                 &mut cfg.monitors.turbo_config,
+                &mut cfg.monitors.wheel_config,
             ]
             .into_iter()
             .flatten()
@@ -439,6 +455,7 @@ impl RuntimeConfig {
             ("throttle_config", &self.monitors.throttle_config),
             ("intake_config", &self.monitors.intake_config),
             ("turbo_config", &self.monitors.turbo_config),
+            ("wheel_config", &self.monitors.wheel_config),
         ] {
             if path.as_ref().is_some_and(|p| p.as_os_str().is_empty()) {
                 return Err(root
@@ -548,20 +565,35 @@ mod tests {
                 "turbo_throttle",
                 "turbo_wastegate",
                 "ambient_pressure",
-                "ambient_temperature"
+                "ambient_temperature",
+                "wheel_fl_speed",
+                "wheel_fl_current",
+                "wheel_fl_brake",
+                "wheel_fr_speed",
+                "wheel_fr_current",
+                "wheel_fr_brake",
+                "wheel_rl_speed",
+                "wheel_rl_current",
+                "wheel_rl_brake",
+                "wheel_rr_speed",
+                "wheel_rr_current",
+                "wheel_rr_brake",
+                "wheel_drive_torque"
             ]
         );
         assert_eq!(cfg.staleness.debounce, DebounceConfig::MonitorInternal);
         assert!(cfg.monitors.throttle);
         assert!(cfg.monitors.intake);
-        // Wired, not yet calibrated: off by default.
+        // Off by default: the air path's false DTCs on other LiU-ICE runs; the wheel monitor
+        // not yet judged.
         assert!(!cfg.monitors.turbo);
+        assert!(!cfg.monitors.wheel);
         assert_eq!(cfg.signal_specs()[1].max_age_ns, 5_000_000);
         assert_eq!(cfg.signal_specs()[6].max_age_ns, 250_000_000);
         assert_eq!(cfg.truth, default_truths());
         let mem = cfg.staleness_memory_config();
         assert_eq!(mem.events[1].name, "tps_no_signal");
-        assert_eq!(mem.validate().expect("valid").len(), 17);
+        assert_eq!(mem.validate().expect("valid").len(), 30);
     }
 
     #[test]

@@ -306,6 +306,9 @@ impl Runtime {
         if cfg.monitors.turbo && wanted("turbo") {
             subsystems.push(Box::new(turbo_monitor(cfg, &table)?));
         }
+        if cfg.monitors.wheel && wanted("wheel") {
+            subsystems.push(Box::new(wheel_monitor(cfg, &table)?));
+        }
         let mut watch: Vec<SignalId> = Vec::new();
         for m in &subsystems {
             for &id in m.inputs() {
@@ -1048,10 +1051,19 @@ pub fn monitor_inputs(cfg: &RuntimeConfig, monitor: &str) -> Result<Vec<String>,
                 m.ambient_temperature_signal,
             ]
         }
+        "wheel" => {
+            let m = crate::wheel::WheelConfig::load(cfg.monitors.wheel_config.as_deref())?.monitor;
+            m.speed_signals
+                .into_iter()
+                .chain(m.current_signals)
+                .chain(m.brake_signals)
+                .chain([m.drive_signal])
+                .collect()
+        }
         other => {
             return Err(RuntimeError::UnknownMonitor(
                 other.to_string(),
-                "throttle, intake, turbo".to_string(),
+                "throttle, intake, turbo, wheel".to_string(),
             ))
         }
     })
@@ -1110,6 +1122,31 @@ fn turbo_monitor(
             .unwrap_or_else(|| "embedded config/turbo_monitor.toml".into()),
         params = %turbo.params_origin,
         "turbo monitor configured"
+    );
+    Ok(monitor)
+}
+
+fn wheel_monitor(
+    cfg: &RuntimeConfig,
+    table: &SignalTable,
+) -> Result<crate::wheel::WheelMonitor, RuntimeError> {
+    let wheel = crate::wheel::WheelConfig::load(cfg.monitors.wheel_config.as_deref())?;
+    let monitor = crate::wheel::WheelMonitor::new(&wheel, table).map_err(|message| {
+        RuntimeError::Monitor {
+            origin: cfg.origin.clone(),
+            monitor: "wheel".into(),
+            message,
+        }
+    })?;
+    tracing::info!(
+        config = cfg
+            .monitors
+            .wheel_config
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_else(|| "embedded config/wheel_monitor.toml".into()),
+        params = %wheel.params_origin,
+        "wheel monitor configured"
     );
     Ok(monitor)
 }
