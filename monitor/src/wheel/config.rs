@@ -386,7 +386,17 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("w.toml") && e.contains("spike_sigmaa"), "{e}");
-        let bad = DEFAULT_WHEEL_PARAMS_TOML.replace("friction_pull = 0.25", "friction_pull = 2.0");
+        let bad: String = DEFAULT_WHEEL_PARAMS_TOML
+            .lines()
+            .map(|l| {
+                if l.starts_with("friction_pull") {
+                    "friction_pull = 2.0".to_string()
+                } else {
+                    l.to_string()
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
         let e = WheelConfig::parse("params = \"p.toml\"\n", "w.toml", &bad, "p.toml")
             .unwrap_err()
             .to_string();
