@@ -5,6 +5,10 @@
 //! branch ([`simulate_turbo`]): a file, a bundled turbo fixture's name (`turbo_leak_ic`), a
 //! directory of turbo scenario files, or a generated set (`turbo_tuning`, `turbo_heldout`);
 //! a directory or a set is written as one log per scenario into the `-o` directory.
+//!
+//! Wheel scenarios (`monitor = "wheel"`, [`fdd_fixtures::wheel_scenario`]) likewise
+//! ([`simulate_wheel`]): a file or a directory of wheel scenario files (no wheel fixtures are
+//! bundled yet). A directory holds turbo or wheel scenarios, not both.
 
 use std::path::{Path, PathBuf};
 
@@ -13,7 +17,12 @@ use fdd_fixtures::scenario_file::{AnyScenario, AnySim, FixtureError};
 use fdd_fixtures::throttle_log::{LogStats, FIXTURE_WRITE_OPTIONS};
 use fdd_fixtures::turbo_scenario::{SetKind, TurboScenario};
 use fdd_fixtures::turbo_sim::{TurboSim, TurboSimError};
-use fdd_fixtures::{intake_log, throttle_log, turbo_log, turbo_scenario};
+use fdd_fixtures::wheel_log::WheelLogError;
+use fdd_fixtures::wheel_scenario::WheelScenario;
+use fdd_fixtures::wheel_sim::{WheelSim, WheelSimError};
+use fdd_fixtures::{
+    intake_log, throttle_log, turbo_log, turbo_scenario, wheel_log, wheel_scenario,
+};
 use fdd_monitor::log::{LogError, LogWriter};
 
 /// Longest simulation `fdd simulate` (and `evaluate`, `calibrate` on scenario files) runs
@@ -57,13 +66,19 @@ pub enum SimulateError {
     Log(#[from] LogError),
     #[error(transparent)]
     TurboSim(#[from] TurboSimError),
+    #[error(transparent)]
+    WheelSim(#[from] WheelSimError),
+    #[error(transparent)]
+    WheelLog(#[from] WheelLogError),
     #[error("{}: cannot create the output directory: {source}", out.display())]
     OutputDir {
         out: PathBuf,
         source: std::io::Error,
     },
-    #[error("{}: no turbo scenario file (monitor = \"turbo\") in this directory", dir.display())]
+    #[error("{}: no turbo or wheel scenario file (monitor = \"turbo\" or \"wheel\") in this directory", dir.display())]
     NoTurboScenarios { dir: PathBuf },
+    #[error("{}: the directory holds both turbo and wheel scenario files; simulate them from separate directories", dir.display())]
+    MixedScenarios { dir: PathBuf },
     #[error("{}: refusing to write the logs of several scenarios into a .mcap path: give -o a directory", out.display())]
     OutputNotDirectory { out: PathBuf },
 }
@@ -158,6 +173,18 @@ pub fn list_bundled() -> Result<String, SimulateError> {
             name, "turbo", sc.duration_s
         );
     }
+    for (name, text) in wheel_scenario::BUNDLED {
+        let sc = WheelScenario::parse(text, name)?;
+        let fault = match sc.fault.fault {
+            fdd_fixtures::wheel_faults::WheelFault::None => "none".to_string(),
+            _ => format!("{} from {} s", sc.fault.truth_name(), sc.fault.start_s),
+        };
+        let _ = writeln!(
+            out,
+            "{:<28} {:<8} {:>8} s  {fault}",
+            name, "wheel", sc.duration_s
+        );
+    }
     let _ = writeln!(
         out,
         "{:<28} {:<8} {:>10}  generated set: -o names a directory",
@@ -179,6 +206,18 @@ pub fn list_bundled() -> Result<String, SimulateError> {
 /// [`MAX_SIMULATE_S`] and `opts.allow_long` is not set (what [`simulate`] checks first), without
 /// simulating it.
 pub fn check_length(scenario: &Path, opts: &SimulateOptions) -> Result<(), SimulateError> {
+    if let Some(wheel) = find_wheel(&scenario.to_string_lossy())? {
+        let list = match wheel {
+            WheelInput::One {
+                scenario, origin, ..
+            } => vec![(*scenario, origin)],
+            WheelInput::Many(list) => list,
+        };
+        for (sc, origin) in list {
+            too_long(sc.duration_s, &origin, opts)?;
+        }
+        return Ok(());
+    }
     if let Some(turbo) = find_turbo(&scenario.to_string_lossy())? {
         let list = match turbo {
             TurboInput::One {
@@ -222,6 +261,9 @@ pub fn simulate(
     out: &Path,
     opts: &SimulateOptions,
 ) -> Result<LogStats, SimulateError> {
+    if let Some(wheel) = find_wheel(scenario)? {
+        return simulate_wheel(wheel, out, opts);
+    }
     if let Some(turbo) = find_turbo(scenario)? {
         return simulate_turbo(turbo, out, opts);
     }
@@ -279,28 +321,20 @@ pub enum TurboInput {
 pub fn find_turbo(arg: &str) -> Result<Option<TurboInput>, SimulateError> {
     let path = Path::new(arg);
     if path.is_dir() {
-        let origin = path.display().to_string();
-        let read_err = |source| ScenarioError::Read {
-            origin: origin.clone(),
-            source,
-        };
-        let mut files = Vec::new();
-        for entry in std::fs::read_dir(path).map_err(read_err)? {
-            let p = entry.map_err(read_err)?.path();
-            if p.extension().is_some_and(|e| e == "toml") {
-                files.push(p);
+        let (turbo, wheel) = scan_dir(path)?;
+        if turbo.is_empty() {
+            if wheel.is_empty() {
+                return Err(SimulateError::NoTurboScenarios { dir: path.into() });
             }
+            // A directory of wheel scenarios: the wheel branch's ([`find_wheel`]).
+            return Ok(None);
         }
-        files.sort();
+        if !wheel.is_empty() {
+            return Err(SimulateError::MixedScenarios { dir: path.into() });
+        }
         let mut many = Vec::new();
-        for f in files {
-            let text = fdd_monitor::text_file::read_text(&f).map_err(ScenarioError::from)?;
-            if turbo_scenario::is_turbo_text(&text) {
-                many.push((TurboScenario::load(&f)?, f.display().to_string()));
-            }
-        }
-        if many.is_empty() {
-            return Err(SimulateError::NoTurboScenarios { dir: path.into() });
+        for f in turbo {
+            many.push((TurboScenario::load(&f)?, f.display().to_string()));
         }
         return Ok(Some(TurboInput::Many(many)));
     }
@@ -339,6 +373,34 @@ pub fn find_turbo(arg: &str) -> Result<Option<TurboInput>, SimulateError> {
     Ok(None)
 }
 
+/// The `.toml` files of a directory that say `monitor = "turbo"` and `monitor = "wheel"`,
+/// each sorted by name.
+fn scan_dir(path: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>), SimulateError> {
+    let origin = path.display().to_string();
+    let read_err = |source| ScenarioError::Read {
+        origin: origin.clone(),
+        source,
+    };
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(path).map_err(read_err)? {
+        let p = entry.map_err(read_err)?.path();
+        if p.extension().is_some_and(|e| e == "toml") {
+            files.push(p);
+        }
+    }
+    files.sort();
+    let (mut turbo, mut wheel) = (Vec::new(), Vec::new());
+    for f in files {
+        let text = fdd_monitor::text_file::read_text(&f).map_err(ScenarioError::from)?;
+        if turbo_scenario::is_turbo_text(&text) {
+            turbo.push(f);
+        } else if wheel_scenario::is_wheel_text(&text) {
+            wheel.push(f);
+        }
+    }
+    Ok((turbo, wheel))
+}
+
 /// Simulates one turbo scenario into the log `out`.
 fn simulate_one_turbo(
     sc: &TurboScenario,
@@ -374,82 +436,215 @@ pub fn simulate_turbo(
             origin,
             file,
         } => {
-            if let Some(f) = &file {
-                if crate::paths::same_file(f, out) {
-                    return Err(SimulateError::OutputIsScenario {
-                        out: out.to_path_buf(),
-                    });
-                }
-            }
-            if out
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
-            {
-                return Err(SimulateError::OutputIsToml {
-                    out: out.to_path_buf(),
-                });
-            }
+            check_single_out(file.as_deref(), out)?;
             simulate_one_turbo(&scenario, &origin, out, opts)
         }
-        TurboInput::Many(list) => {
-            if out
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("mcap") || e.eq_ignore_ascii_case("toml"))
-            {
-                return Err(SimulateError::OutputNotDirectory {
-                    out: out.to_path_buf(),
-                });
-            }
-            for (sc, origin) in &list {
-                if sc.duration_s > MAX_SIMULATE_S && !opts.allow_long {
-                    return Err(SimulateError::TooLong {
-                        origin: origin.clone(),
-                        duration_s: sc.duration_s,
-                        max_s: MAX_SIMULATE_S,
-                    });
-                }
-            }
-            std::fs::create_dir_all(out).map_err(|source| SimulateError::OutputDir {
+        TurboInput::Many(list) => simulate_many(
+            &list,
+            out,
+            opts,
+            |sc| sc.name.as_str(),
+            |sc| sc.duration_s,
+            |sc, origin, file| simulate_one_turbo(sc, origin, file, opts),
+        ),
+    }
+}
+
+/// Refuses a scenario longer than [`MAX_SIMULATE_S`] unless `opts.allow_long`.
+fn too_long(duration_s: f64, origin: &str, opts: &SimulateOptions) -> Result<(), SimulateError> {
+    if duration_s > MAX_SIMULATE_S && !opts.allow_long {
+        return Err(SimulateError::TooLong {
+            origin: origin.to_string(),
+            duration_s,
+            max_s: MAX_SIMULATE_S,
+        });
+    }
+    Ok(())
+}
+
+/// Refuses to write one scenario's log over its own scenario file or into a `.toml` path.
+fn check_single_out(file: Option<&Path>, out: &Path) -> Result<(), SimulateError> {
+    if let Some(f) = file {
+        if crate::paths::same_file(f, out) {
+            return Err(SimulateError::OutputIsScenario {
                 out: out.to_path_buf(),
-                source,
-            })?;
-            let workers = std::thread::available_parallelism()
-                .map_or(1, |n| n.get())
-                .min(list.len().max(1));
-            let next = std::sync::atomic::AtomicUsize::new(0);
-            let results: Vec<Result<LogStats, SimulateError>> = std::thread::scope(|scope| {
-                let handles: Vec<_> = (0..workers)
-                    .map(|_| {
-                        scope.spawn(|| {
-                            let mut mine = Vec::new();
-                            loop {
-                                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                                let Some((sc, origin)) = list.get(i) else {
-                                    break;
-                                };
-                                tracing::info!("[{}/{}] {}", i + 1, list.len(), sc.name);
-                                let file = out.join(format!("{}.mcap", sc.name));
-                                mine.push(simulate_one_turbo(sc, origin, &file, opts));
-                            }
-                            mine
-                        })
-                    })
-                    .collect();
-                handles
-                    .into_iter()
-                    .flat_map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-                    .collect()
             });
-            let mut total = LogStats {
-                frames: 0,
-                messages: 0,
-            };
-            for r in results {
-                let s = r?;
-                total.frames += s.frames;
-                total.messages += s.messages;
-            }
-            Ok(total)
         }
+    }
+    if out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+    {
+        return Err(SimulateError::OutputIsToml {
+            out: out.to_path_buf(),
+        });
+    }
+    Ok(())
+}
+
+/// Simulates every `(scenario, origin)` of `list` into `out/<name>.mcap` with `one`, in
+/// parallel on the machine's cores, after the checks of a directory output (not a `.mcap` or
+/// `.toml` path, every scenario within [`MAX_SIMULATE_S`] unless allowed; the directory is
+/// created); the stats are summed.
+fn simulate_many<T: Sync>(
+    list: &[(T, String)],
+    out: &Path,
+    opts: &SimulateOptions,
+    name: impl Fn(&T) -> &str + Sync,
+    duration_s: impl Fn(&T) -> f64,
+    one: impl Fn(&T, &str, &Path) -> Result<LogStats, SimulateError> + Sync,
+) -> Result<LogStats, SimulateError> {
+    if out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap") || e.eq_ignore_ascii_case("toml"))
+    {
+        return Err(SimulateError::OutputNotDirectory {
+            out: out.to_path_buf(),
+        });
+    }
+    for (sc, origin) in list {
+        too_long(duration_s(sc), origin, opts)?;
+    }
+    std::fs::create_dir_all(out).map_err(|source| SimulateError::OutputDir {
+        out: out.to_path_buf(),
+        source,
+    })?;
+    let workers = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(list.len().max(1));
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let results: Vec<Result<LogStats, SimulateError>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..workers)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut mine = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some((sc, origin)) = list.get(i) else {
+                            break;
+                        };
+                        tracing::info!("[{}/{}] {}", i + 1, list.len(), name(sc));
+                        let file = out.join(format!("{}.mcap", name(sc)));
+                        mine.push(one(sc, origin, &file));
+                    }
+                    mine
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect()
+    });
+    let mut total = LogStats {
+        frames: 0,
+        messages: 0,
+    };
+    for r in results {
+        let s = r?;
+        total.frames += s.frames;
+        total.messages += s.messages;
+    }
+    Ok(total)
+}
+
+/// Wheel scenarios found for an argument of `fdd simulate`.
+#[derive(Debug)]
+pub enum WheelInput {
+    /// One scenario (a file or a bundled fixture), with how errors name it and its file.
+    One {
+        scenario: Box<WheelScenario>,
+        origin: String,
+        file: Option<PathBuf>,
+    },
+    /// Several (a directory): one log each, into a directory.
+    Many(Vec<(WheelScenario, String)>),
+}
+
+/// The wheel scenarios `arg` names, if it names any: a directory whose `.toml` files say
+/// `monitor = "wheel"` (and none `monitor = "turbo"`), a file (or the name with `.toml`) that
+/// says `monitor = "wheel"`, or a bundled wheel fixture's name
+/// ([`wheel_scenario::BUNDLED`], empty so far). `None` for everything else.
+pub fn find_wheel(arg: &str) -> Result<Option<WheelInput>, SimulateError> {
+    let path = Path::new(arg);
+    if path.is_dir() {
+        let (turbo, wheel) = scan_dir(path)?;
+        if wheel.is_empty() {
+            return Ok(None);
+        }
+        if !turbo.is_empty() {
+            return Err(SimulateError::MixedScenarios { dir: path.into() });
+        }
+        let mut many = Vec::new();
+        for f in wheel {
+            many.push((WheelScenario::load(&f)?, f.display().to_string()));
+        }
+        return Ok(Some(WheelInput::Many(many)));
+    }
+    let with_ext = PathBuf::from(format!("{arg}.toml"));
+    for f in [path, with_ext.as_path()] {
+        if f.is_file() {
+            let text = fdd_monitor::text_file::read_text(f).map_err(ScenarioError::from)?;
+            if !wheel_scenario::is_wheel_text(&text) {
+                return Ok(None);
+            }
+            return Ok(Some(WheelInput::One {
+                scenario: Box::new(WheelScenario::load(f)?),
+                origin: f.display().to_string(),
+                file: Some(f.to_path_buf()),
+            }));
+        }
+    }
+    if let Some((name, text)) = wheel_scenario::BUNDLED.iter().find(|(n, _)| *n == arg) {
+        let origin = format!("bundled scenario {name}");
+        return Ok(Some(WheelInput::One {
+            scenario: Box::new(WheelScenario::parse(text, &origin)?),
+            origin,
+            file: None,
+        }));
+    }
+    Ok(None)
+}
+
+/// Simulates one wheel scenario into the log `out` (the simulator is built before the file is
+/// created, so a scenario it refuses leaves no file).
+fn simulate_one_wheel(
+    sc: &WheelScenario,
+    origin: &str,
+    out: &Path,
+    opts: &SimulateOptions,
+) -> Result<LogStats, SimulateError> {
+    too_long(sc.duration_s, origin, opts)?;
+    let sim = WheelSim::from_scenario(sc, origin)?;
+    let writer = LogWriter::create_with(out, FIXTURE_WRITE_OPTIONS)?;
+    let (_, stats) = wheel_log::write_log(sim, writer)?;
+    Ok(stats)
+}
+
+/// The wheel branch of [`simulate`]: one scenario into the log `out` (the same refusals as the
+/// other monitors' scenarios), or several into the directory `out`, as `out/<name>.mcap`,
+/// in parallel.
+pub fn simulate_wheel(
+    input: WheelInput,
+    out: &Path,
+    opts: &SimulateOptions,
+) -> Result<LogStats, SimulateError> {
+    match input {
+        WheelInput::One {
+            scenario,
+            origin,
+            file,
+        } => {
+            check_single_out(file.as_deref(), out)?;
+            simulate_one_wheel(&scenario, &origin, out, opts)
+        }
+        WheelInput::Many(list) => simulate_many(
+            &list,
+            out,
+            opts,
+            |sc| sc.name.as_str(),
+            |sc| sc.duration_s,
+            |sc, origin, file| simulate_one_wheel(sc, origin, file, opts),
+        ),
     }
 }
