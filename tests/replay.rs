@@ -451,10 +451,11 @@ fn remapped_config_replays_a_log_with_other_names() {
 
     // With the default mapping nothing matches: every enabled monitor runs (a log with none of
     // any monitor's topics is taken as mis-mapped) and every signal they read is missing (the
-    // turbo monitor is off by default: its nine signals are not watched).
+    // turbo and wheel monitors are off by default: their nine and thirteen signals are not
+    // watched).
     let s = run_lib(&log, &ReplayOptions::default());
     let n = RuntimeConfig::load(None).expect("default").signals.len();
-    assert_eq!(n, 17, "3 throttle, 5 intake and 9 turbo signals");
+    assert_eq!(n, 30, "3 throttle, 5 intake, 9 turbo and 13 wheel signals");
     assert_eq!(s.missing_signals().count(), 8);
     assert_eq!(s.dtcs_raised().count(), 8);
 

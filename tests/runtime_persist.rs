@@ -161,8 +161,8 @@ fn the_runtime_answers_uds_dtc_requests() {
     server.handle(&[0x19, 0x02, 0xFF], &mut resp);
     assert_eq!(
         resp.len(),
-        3 + 4 * 24,
-        "every DTC listed (status 0x50 matches 0xFF): the 17 signals' no-signal DTCs and the throttle monitor's 7"
+        3 + 4 * 37,
+        "every DTC listed (status 0x50 matches 0xFF): the 30 signals' no-signal DTCs and the throttle monitor's 7"
     );
     assert!(resp[3..].chunks(4).all(|c| c[3] == 0x50), "{resp:02X?}");
 }
